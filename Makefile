@@ -1,0 +1,34 @@
+# One-line set-up: every target creates the virtual environment it needs.
+PYTHON ?= python3.11
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: demo test bench lint sample-data clean
+
+$(STAMP): pyproject.toml
+	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "$(PYTHON) not found (set PYTHON=...)"; exit 2; }
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e ".[dev]"
+	@touch $(STAMP)
+
+demo: $(STAMP)
+	OPENBLAS_NUM_THREADS=1 $(BIN)/ndt-register sample_data/scan_00.laz sample_data/scan_01.laz --out ndt_results/demo
+	$(BIN)/python tools/demo_check.py ndt_results/demo sample_data/poses_T_world_scan.txt scan_00.laz scan_01.laz
+
+test: $(STAMP)
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q
+
+bench: $(STAMP)
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python benchmarks/run.py
+
+lint: $(STAMP)
+	$(BIN)/ruff check ndt_cli tests tools benchmarks
+	$(BIN)/ruff format --check ndt_cli tests tools benchmarks
+
+sample-data: $(STAMP)
+	$(BIN)/python tools/make_sample_data.py --out sample_data
+
+clean:
+	rm -rf $(VENV) ndt_results .pytest_cache

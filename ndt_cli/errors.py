@@ -1,0 +1,48 @@
+"""One exception family for everything the user can cause or fix.
+
+The CLI turns an :class:`NdtError` into a one-line message and the exit code
+stored on its class; anything else is a bug and keeps its traceback.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+EXIT_OK = 0
+EXIT_REGISTRATION = 1
+EXIT_INPUT = 2
+
+
+class NdtError(Exception):
+    """Base of all user-facing errors; ``exit_code`` is what the CLI returns."""
+
+    exit_code: int = EXIT_INPUT
+
+    def __init__(self, message: str, path: str | Path | None = None) -> None:
+        self.path = None if path is None else Path(path)
+        self.message = message
+        super().__init__(f"{self.path}: {message}" if self.path is not None else message)
+
+
+class InputError(NdtError):
+    """A point file is missing, unreadable, of unknown type or holds no usable points."""
+
+    exit_code = EXIT_INPUT
+
+
+class ConfigError(NdtError):
+    """The YAML configuration (or a CLI option) is invalid: unknown key, wrong type, bad value."""
+
+    exit_code = EXIT_INPUT
+
+
+class OutputError(NdtError):
+    """An output file or folder cannot be written."""
+
+    exit_code = EXIT_INPUT
+
+
+class RegistrationError(NdtError):
+    """Registration ran but failed (e.g. no overlap: the score is zero)."""
+
+    exit_code = EXIT_REGISTRATION
