@@ -1,0 +1,248 @@
+"""Configuration: nested, typed sections with defaults, loaded from YAML.
+
+Unknown keys, wrong types and impossible values raise :class:`~ndt_cli.errors.ConfigError`
+naming the key. ``configs/default.yaml`` documents every key with its unit.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+
+from ndt_cli.errors import ConfigError
+
+OptimizerName = Literal["newton", "lm_fixed", "lm"]
+
+
+@dataclass(frozen=True)
+class GroundConfig:
+    """How each scan's ground level is found (z in the scan's own frame, metres)."""
+
+    z: float | None = None  # fixed ground level for both scans; None = estimate per scan
+    bin_size: float = 0.05  # height histogram bin for the estimate, m
+
+
+@dataclass(frozen=True)
+class SlicesConfig:
+    """Horizontal slices cut out of each scan and projected onto the ground plane."""
+
+    heights: tuple[float, ...] = (1.0, 2.0, 4.0, 8.0, 12.0)  # slice centres above ground, m
+    thickness: float = 0.40  # m
+
+
+@dataclass(frozen=True)
+class GridConfig:
+    """The NDT grid of the target: one per slice and cell size."""
+
+    cell_sizes: tuple[float, ...] = (20.0, 10.0, 5.0, 2.0, 1.0)  # coarse to fine, m
+    min_points: int = 3  # a cell needs this many points to get a normal distribution
+    min_eigen_ratio: float = 1e-3  # small covariance eigenvalue clamped to >= ratio * large one
+    min_variance: float = 1e-4  # absolute floor of the covariance eigenvalues, m^2
+    overlap: bool = False  # Biber's 4 grids shifted by half a cell
+
+
+@dataclass(frozen=True)
+class SourceConfig:
+    """How the moving scan's slice points are thinned before scoring."""
+
+    voxel: float = 0.2  # 2D voxel filter of each slice, m (0 = off)
+    points_per_slice: int = 20000  # cap per slice after the voxel filter (deterministic sample)
+
+
+@dataclass(frozen=True)
+class OptimizerConfig:
+    """The local solver run at every cell size."""
+
+    method: OptimizerName = "newton"
+    max_iterations: int = 40  # per cell size and start
+    patience: int = 3  # stop after this many iterations without a better score
+    lm_lambda: float = 0.01  # lm_fixed: lambda as a multiple of mean diag(J^T J) at the level start
+    max_step: float = 0.5  # largest translation step, in cell sizes
+    max_rotation_step_deg: float = 15.0  # largest rotation step, degrees
+
+
+@dataclass(frozen=True)
+class SearchConfig:
+    """Start search at the coarsest cell size (no initial guess needed)."""
+
+    yaw_starts: int = 12  # start headings spread over 360 degrees
+    translation_range: float = 40.0  # starts cover +-range around the aligned slice centroids, m
+    translation_step: float = 10.0  # spacing of the translation starts, m
+    points_per_slice: int = 1000  # source points per slice used during the search
+    keep_candidates: int = 4  # distinct coarse solutions refined down to the finest cell
+    refine_offsets: bool = True  # restart each finer level from +-half a cell as well
+
+
+@dataclass(frozen=True)
+class Config:
+    """All settings of a registration."""
+
+    ground: GroundConfig = field(default_factory=GroundConfig)
+    slices: SlicesConfig = field(default_factory=SlicesConfig)
+    grid: GridConfig = field(default_factory=GridConfig)
+    source: SourceConfig = field(default_factory=SourceConfig)
+    optimizer: OptimizerConfig = field(default_factory=OptimizerConfig)
+    search: SearchConfig = field(default_factory=SearchConfig)
+
+    def __post_init__(self) -> None:
+        _validate(self)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain nested dict (lists instead of tuples), ready for YAML/JSON."""
+        return _plain(dataclasses.asdict(self))
+
+    def replace(self, **sections: dict[str, Any]) -> Config:
+        """A copy with some keys of some sections changed, e.g. ``replace(grid={"overlap": True})``."""
+        data = self.to_dict()
+        for name, values in sections.items():
+            if name not in data:
+                raise ConfigError(f"unknown section '{name}'")
+            data[name].update(values)
+        return from_dict(data)
+
+
+def _plain(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {k: _plain(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_plain(v) for v in obj]
+    return obj
+
+
+def _convert(value: Any, tp: Any, key: str) -> Any:
+    """Check ``value`` against the annotation ``tp`` and convert (int->float, list->tuple)."""
+    origin = typing.get_origin(tp)
+    if origin is typing.Union or origin is types.UnionType:
+        args = typing.get_args(tp)
+        if value is None and type(None) in args:
+            return None
+        inner = [a for a in args if a is not type(None)]
+        return _convert(value, inner[0], key)
+    if origin is Literal:
+        choices = typing.get_args(tp)
+        if value not in choices:
+            raise ConfigError(
+                f"'{key}' must be one of {', '.join(map(str, choices))}, got {value!r}"
+            )
+        return value
+    if origin is tuple:
+        if not isinstance(value, list | tuple):
+            raise ConfigError(f"'{key}' must be a list, got {type(value).__name__}")
+        item_tp = typing.get_args(tp)[0]
+        return tuple(_convert(v, item_tp, f"{key}[{i}]") for i, v in enumerate(value))
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"'{key}' must be true or false, got {value!r}")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"'{key}' must be an integer, got {value!r}")
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(f"'{key}' must be a number, got {value!r}")
+        return float(value)
+    raise ConfigError(f"'{key}': unsupported type")  # pragma: no cover - programming error
+
+
+def _section_from_dict(cls: type, data: Any, prefix: str) -> Any:
+    if not isinstance(data, dict):
+        raise ConfigError(f"'{prefix}' must be a mapping, got {type(data).__name__}")
+    hints = typing.get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        raise ConfigError(
+            f"unknown key '{prefix}.{unknown[0]}' (known: {', '.join(sorted(names))})"
+            if prefix
+            else f"unknown section '{unknown[0]}' (known: {', '.join(sorted(names))})"
+        )
+    kwargs = {}
+    for name, value in data.items():
+        key = f"{prefix}.{name}" if prefix else name
+        tp = hints[name]
+        if dataclasses.is_dataclass(tp):
+            kwargs[name] = _section_from_dict(tp, value if value is not None else {}, key)
+        else:
+            kwargs[name] = _convert(value, tp, key)
+    return kwargs if cls is Config else cls(**kwargs)
+
+
+def from_dict(data: dict[str, Any] | None) -> Config:
+    """Build a :class:`Config` from a nested dict; missing keys take their defaults."""
+    return Config(**_section_from_dict(Config, data or {}, ""))
+
+
+def load(path: str | Path | None) -> Config:
+    """Read a YAML config file (``None`` gives the defaults)."""
+    if path is None:
+        return Config()
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError("config file not found", p) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"cannot read config ({exc})", p) from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        raise ConfigError(f"invalid YAML{where}", p) from None
+    if data is not None and not isinstance(data, dict):
+        raise ConfigError("the config must be a mapping of sections", p)
+    try:
+        return from_dict(data)
+    except ConfigError as exc:
+        raise ConfigError(exc.message, p) from None
+
+
+def dump(config: Config) -> str:
+    """YAML text of ``config`` (what ``config_used.yaml`` holds)."""
+    return yaml.safe_dump(config.to_dict(), sort_keys=False)
+
+
+def _validate(c: Config) -> None:
+    def positive(key: str, value: float) -> None:
+        if not value > 0:
+            raise ConfigError(f"'{key}' must be > 0, got {value}")
+
+    if c.ground.z is not None and not -1e7 < c.ground.z < 1e7:
+        raise ConfigError(f"'ground.z' is implausible: {c.ground.z}")
+    positive("ground.bin_size", c.ground.bin_size)
+    if not c.slices.heights:
+        raise ConfigError("'slices.heights' must list at least one height")
+    positive("slices.thickness", c.slices.thickness)
+    cells = c.grid.cell_sizes
+    if not cells:
+        raise ConfigError("'grid.cell_sizes' must list at least one cell size")
+    for i, s in enumerate(cells):
+        positive(f"grid.cell_sizes[{i}]", s)
+    if any(b >= a for a, b in zip(cells, cells[1:], strict=False)):
+        raise ConfigError("'grid.cell_sizes' must be strictly decreasing (coarse to fine)")
+    if c.grid.min_points < 3:
+        raise ConfigError("'grid.min_points' must be >= 3 (a 2D covariance needs 3 points)")
+    if not 0 < c.grid.min_eigen_ratio <= 1:
+        raise ConfigError("'grid.min_eigen_ratio' must be in (0, 1]")
+    positive("grid.min_variance", c.grid.min_variance)
+    if c.source.voxel < 0:
+        raise ConfigError("'source.voxel' must be >= 0")
+    positive("source.points_per_slice", c.source.points_per_slice)
+    positive("optimizer.max_iterations", c.optimizer.max_iterations)
+    positive("optimizer.patience", c.optimizer.patience)
+    positive("optimizer.lm_lambda", c.optimizer.lm_lambda)
+    positive("optimizer.max_step", c.optimizer.max_step)
+    positive("optimizer.max_rotation_step_deg", c.optimizer.max_rotation_step_deg)
+    positive("search.yaw_starts", c.search.yaw_starts)
+    if c.search.translation_range < 0:
+        raise ConfigError("'search.translation_range' must be >= 0")
+    positive("search.translation_step", c.search.translation_step)
+    positive("search.points_per_slice", c.search.points_per_slice)
+    positive("search.keep_candidates", c.search.keep_candidates)

@@ -1,0 +1,106 @@
+"""Rigid transforms: 4x4 homogeneous matrices (float64) and the planar pose (tx, ty, yaw).
+
+Naming follows ``T_a_b``: the matrix maps points from frame b into frame a, ``p_a = T_a_b @ p_b``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ndt_cli.errors import InputError
+
+
+def pose2d_matrix(tx: float, ty: float, yaw: float, tz: float = 0.0) -> np.ndarray:
+    """4x4 of a rotation by ``yaw`` (radians) about z followed by a translation (metres)."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    T = np.eye(4)
+    T[:2, :2] = [[c, -s], [s, c]]
+    T[:3, 3] = tx, ty, tz
+    return T
+
+
+def translation(v: np.ndarray) -> np.ndarray:
+    """4x4 pure translation by the 3-vector ``v`` (metres)."""
+    T = np.eye(4)
+    T[:3, 3] = v
+    return T
+
+
+def yaw_of(T: np.ndarray) -> float:
+    """Heading (radians) of the rotation part of ``T``: angle of its x axis in the xy plane."""
+    return float(np.arctan2(T[1, 0], T[0, 0]))
+
+
+def wrap_angle(a: np.ndarray | float) -> np.ndarray | float:
+    """Angle(s) wrapped into [-pi, pi)."""
+    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
+
+
+def rotation_angle_deg(R: np.ndarray) -> float:
+    """Angle (degrees) of a 3x3 rotation matrix (geodesic distance to the identity)."""
+    c = (np.trace(R[:3, :3]) - 1.0) / 2.0
+    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
+def transform_errors(T_est: np.ndarray, T_ref: np.ndarray) -> tuple[float, float]:
+    """Rotation error (degrees) and translation error (metres) of ``T_est`` against ``T_ref``."""
+    D = np.linalg.inv(T_ref) @ T_est
+    return rotation_angle_deg(D), float(np.linalg.norm(T_est[:3, 3] - T_ref[:3, 3]))
+
+
+def apply(T: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Apply the 4x4 ``T`` to (N,3) points."""
+    return points @ T[:3, :3].T + T[:3, 3]
+
+
+def format_matrix(T: np.ndarray) -> str:
+    """Text of a 4x4: four rows of four numbers, enough digits to round-trip float64."""
+    return "\n".join(" ".join(f"{v:.17g}" for v in row) for row in np.asarray(T)) + "\n"
+
+
+def read_matrix(path: str | Path) -> np.ndarray:
+    """Read a 4x4 rigid transform from a text file (16 numbers, row-major; '#' comments)."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError("transform file not found", p) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read transform ({exc})", p) from None
+    try:
+        values = [float(v) for line in text.splitlines() for v in line.split("#")[0].split()]
+    except ValueError:
+        raise InputError("transform file holds a non-numeric value", p) from None
+    if len(values) != 16:
+        raise InputError(f"expected 16 numbers (a 4x4 matrix), found {len(values)}", p)
+    T = np.array(values).reshape(4, 4)
+    if not np.all(np.isfinite(T)) or not np.allclose(T[3], [0, 0, 0, 1]):
+        raise InputError("not a rigid 4x4 transform (last row must be 0 0 0 1)", p)
+    R = T[:3, :3]
+    if not np.allclose(R @ R.T, np.eye(3), atol=1e-4) or np.linalg.det(R) < 0:
+        raise InputError("the rotation part is not a rotation matrix", p)
+    return T
+
+
+def read_pose_list(path: str | Path) -> dict[str, np.ndarray]:
+    """Read ``name m00 m01 ... m33`` lines (a 4x4 per scan, row-major; '#' comments) into a dict."""
+    p = Path(path)
+    try:
+        lines = p.read_text(encoding="utf-8").splitlines()
+    except OSError as exc:
+        raise InputError(f"cannot read poses ({exc.strerror or exc})", p) from None
+    poses = {}
+    for n, line in enumerate(lines, 1):
+        fields = line.split("#")[0].split()
+        if not fields:
+            continue
+        try:
+            values = [float(v) for v in fields[1:]]
+        except ValueError:
+            values = []
+        if len(values) != 16:
+            raise InputError(f"line {n}: expected a name and 16 numbers", p)
+        poses[fields[0]] = np.array(values).reshape(4, 4)
+    return poses
