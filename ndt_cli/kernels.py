@@ -1,0 +1,372 @@
+"""NDT scoring kernels (Numba) and their plain-numpy twins.
+
+The objective for a batch of planar poses ``p = (tx, ty, phi)`` (metres, radians) that map source
+slice points into the target frame, ``x' = R(phi) x + t``, is
+
+    f(p) = - sum_slices sum_points sum_grids exp(-1/2 d^T Sigma^-1 d),   d = x' - q,
+
+with ``q``, ``Sigma`` the normal distribution of the target cell that ``x'`` falls in (no cell:
+no term). One call returns, per pose, the accumulators listed below: score, gradient and Hessian
+of ``f`` (Newton), and ``J^T J``, ``J^T r`` and ``E = 1/2 sum r^2`` of the residuals
+``r = 1 - s`` per point and grid (Levenberg-Marquardt), and the number of matched points.
+
+Sums are taken per fixed chunk of points and then added in a fixed order, so results are
+bit-identical whatever the number of threads.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from ndt_cli.grid import NDTMap
+
+# accumulator columns
+SCORE = 0
+GRAD = slice(1, 4)  # gradient of f = -score
+HESS = slice(4, 10)  # Hessian of f: xx, xy, xp, yy, yp, pp
+JTJ = slice(10, 16)  # J^T J of the residuals, same order
+JTR = slice(16, 19)  # J^T r (gradient of E)
+ERR = 19  # E = 1/2 sum (1 - s)^2 over all (point, grid) pairs
+MATCHED = 20  # (point, grid) pairs that fell into a cell
+NACC = 21
+CHUNK = 2048  # points per reduction chunk (fixed: determines the summation order)
+
+_SYM = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]])
+
+
+@dataclass(frozen=True)
+class SourcePoints:
+    """Source slice points flattened for the kernels: ``xy`` (N,2) metres, ``slice_id`` (N,)."""
+
+    xy: np.ndarray
+    slice_id: np.ndarray
+
+    @classmethod
+    def from_slices(cls, slices: list[np.ndarray]) -> SourcePoints:
+        xy = np.ascontiguousarray(np.concatenate([s.reshape(-1, 2) for s in slices]), np.float64)
+        sid = np.concatenate([np.full(len(s), k, np.int32) for k, s in enumerate(slices)])
+        return cls(xy, sid.astype(np.int32))
+
+    def __len__(self) -> int:
+        return len(self.xy)
+
+    def per_slice(self, n_slices: int) -> np.ndarray:
+        """Number of points in each slice."""
+        return np.bincount(self.slice_id, minlength=n_slices)
+
+
+def sym3(v: np.ndarray) -> np.ndarray:
+    """(..., 6) upper-triangle rows (xx, xy, xp, yy, yp, pp) to (..., 3, 3) symmetric matrices."""
+    return v[..., _SYM]
+
+
+@numba.njit(parallel=True, cache=True, fastmath=False)
+def _accumulate(
+    params,
+    xy,
+    sid,
+    origin,
+    shape,
+    offset,
+    slice_grids,
+    cell_index,
+    means,
+    icov,
+    cell_size,
+    chunk,
+    out,
+):  # pragma: no cover - compiled
+    n_starts = params.shape[0]
+    n = xy.shape[0]
+    n_chunks = out.shape[1]
+    inv_cell = 1.0 / cell_size
+    for task in numba.prange(n_starts * n_chunks):
+        st = task // n_chunks
+        c = task - st * n_chunks
+        tx = params[st, 0]
+        ty = params[st, 1]
+        co = np.cos(params[st, 2])
+        si = np.sin(params[st, 2])
+        score = 0.0
+        g0 = 0.0
+        g1 = 0.0
+        g2 = 0.0
+        h00 = 0.0
+        h01 = 0.0
+        h02 = 0.0
+        h11 = 0.0
+        h12 = 0.0
+        h22 = 0.0
+        j00 = 0.0
+        j01 = 0.0
+        j02 = 0.0
+        j11 = 0.0
+        j12 = 0.0
+        j22 = 0.0
+        r0 = 0.0
+        r1 = 0.0
+        r2 = 0.0
+        err = 0.0
+        matched = 0.0
+        stop = min(n, (c + 1) * chunk)
+        for i in range(c * chunk, stop):
+            x = xy[i, 0]
+            y = xy[i, 1]
+            xp = co * x - si * y + tx
+            yp = si * x + co * y + ty
+            jx = -si * x - co * y  # d x'/d phi
+            jy = co * x - si * y
+            k = sid[i]
+            for g in range(slice_grids[k], slice_grids[k + 1]):
+                fx = (xp - origin[g, 0]) * inv_cell
+                fy = (yp - origin[g, 1]) * inv_cell
+                ci = -1
+                if fx >= 0.0 and fy >= 0.0:
+                    ix = int(fx)
+                    iy = int(fy)
+                    if ix < shape[g, 0] and iy < shape[g, 1]:
+                        ci = cell_index[offset[g] + ix * shape[g, 1] + iy]
+                if ci < 0:
+                    err += 0.5
+                    continue
+                dx = xp - means[ci, 0]
+                dy = yp - means[ci, 1]
+                a = icov[ci, 0]
+                b = icov[ci, 1]
+                cc = icov[ci, 2]
+                u0 = a * dx + b * dy  # Sigma^-1 d
+                u1 = b * dx + cc * dy
+                e = np.exp(-0.5 * (dx * u0 + dy * u1))
+                u2 = u0 * jx + u1 * jy
+                ajx = a * jx + b * jy
+                ajy = b * jx + cc * jy
+                score += e
+                g0 += e * u0
+                g1 += e * u1
+                g2 += e * u2
+                h00 += e * (a - u0 * u0)
+                h01 += e * (b - u0 * u1)
+                h02 += e * (ajx - u0 * u2)
+                h11 += e * (cc - u1 * u1)
+                h12 += e * (ajy - u1 * u2)
+                h22 += e * (jx * ajx + jy * ajy - u0 * jy + u1 * jx - u2 * u2)
+                e2 = e * e
+                j00 += e2 * u0 * u0
+                j01 += e2 * u0 * u1
+                j02 += e2 * u0 * u2
+                j11 += e2 * u1 * u1
+                j12 += e2 * u1 * u2
+                j22 += e2 * u2 * u2
+                w = e * (1.0 - e)
+                r0 += w * u0
+                r1 += w * u1
+                r2 += w * u2
+                err += 0.5 * (1.0 - e) * (1.0 - e)
+                matched += 1.0
+        o = out[st, c]
+        o[0] = score
+        o[1] = g0
+        o[2] = g1
+        o[3] = g2
+        o[4] = h00
+        o[5] = h01
+        o[6] = h02
+        o[7] = h11
+        o[8] = h12
+        o[9] = h22
+        o[10] = j00
+        o[11] = j01
+        o[12] = j02
+        o[13] = j11
+        o[14] = j12
+        o[15] = j22
+        o[16] = r0
+        o[17] = r1
+        o[18] = r2
+        o[19] = err
+        o[20] = matched
+
+
+@numba.njit(parallel=True, cache=True, fastmath=False)
+def _point_scores(
+    params,
+    xy,
+    sid,
+    origin,
+    shape,
+    offset,
+    slice_grids,
+    cell_index,
+    means,
+    icov,
+    cell_size,
+    s_out,
+    j_out,
+):  # pragma: no cover - compiled
+    inv_cell = 1.0 / cell_size
+    tx = params[0]
+    ty = params[1]
+    co = np.cos(params[2])
+    si = np.sin(params[2])
+    for i in numba.prange(xy.shape[0]):
+        x = xy[i, 0]
+        y = xy[i, 1]
+        xp = co * x - si * y + tx
+        yp = si * x + co * y + ty
+        jx = -si * x - co * y
+        jy = co * x - si * y
+        s = 0.0
+        d0 = 0.0
+        d1 = 0.0
+        d2 = 0.0
+        k = sid[i]
+        for g in range(slice_grids[k], slice_grids[k + 1]):
+            fx = (xp - origin[g, 0]) * inv_cell
+            fy = (yp - origin[g, 1]) * inv_cell
+            if fx < 0.0 or fy < 0.0:
+                continue
+            ix = int(fx)
+            iy = int(fy)
+            if ix >= shape[g, 0] or iy >= shape[g, 1]:
+                continue
+            ci = cell_index[offset[g] + ix * shape[g, 1] + iy]
+            if ci < 0:
+                continue
+            dx = xp - means[ci, 0]
+            dy = yp - means[ci, 1]
+            u0 = icov[ci, 0] * dx + icov[ci, 1] * dy
+            u1 = icov[ci, 1] * dx + icov[ci, 2] * dy
+            e = np.exp(-0.5 * (dx * u0 + dy * u1))
+            s += e
+            d0 -= e * u0
+            d1 -= e * u1
+            d2 -= e * (u0 * jx + u1 * jy)
+        s_out[i] = s
+        j_out[i, 0] = d0
+        j_out[i, 1] = d1
+        j_out[i, 2] = d2
+
+
+def _map_args(m: NDTMap) -> tuple:
+    return (
+        m.grid_origin,
+        m.grid_shape,
+        m.grid_offset,
+        m.slice_grids,
+        m.cell_index,
+        m.means,
+        m.icov,
+        m.cell_size,
+    )
+
+
+def evaluate(ndt_map: NDTMap, src: SourcePoints, params: np.ndarray) -> np.ndarray:
+    """Accumulators (S, NACC) for the S poses in ``params`` (S,3): see the module docstring."""
+    params = np.ascontiguousarray(np.atleast_2d(params), dtype=np.float64)
+    n_chunks = max(1, -(-len(src) // CHUNK))
+    out = np.zeros((params.shape[0], n_chunks, NACC))
+    if len(src) and params.shape[0]:
+        _accumulate(params, src.xy, src.slice_id, *_map_args(ndt_map), CHUNK, out)
+    return out.sum(axis=1)
+
+
+def point_scores(
+    ndt_map: NDTMap, src: SourcePoints, p: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per point: score ``s`` (N,) summed over its slice's grids and its Jacobian ``ds/dp`` (N,3)."""
+    p = np.ascontiguousarray(p, dtype=np.float64).reshape(3)
+    s = np.zeros(len(src))
+    J = np.zeros((len(src), 3))
+    if len(src):
+        _point_scores(p, src.xy, src.slice_id, *_map_args(ndt_map), s, J)
+    return s, J
+
+
+# ----------------------------------------------------------------------------- numpy twins
+
+
+def _lookup_numpy(m: NDTMap, xp: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """Cell row for each transformed point in grid ``g`` (per point), -1 when outside / empty."""
+    f = (xp - m.grid_origin[g]) / m.cell_size
+    ij = np.floor(f).astype(np.int64)
+    nx, ny = m.grid_shape[g, 0], m.grid_shape[g, 1]
+    inside = (f[:, 0] >= 0) & (f[:, 1] >= 0) & (ij[:, 0] < nx) & (ij[:, 1] < ny)
+    ci = np.full(len(xp), -1, dtype=np.int64)
+    ci[inside] = m.cell_index[m.grid_offset[g[inside]] + ij[inside, 0] * ny[inside] + ij[inside, 1]]
+    return ci
+
+
+def _terms_numpy(m: NDTMap, src: SourcePoints, p: np.ndarray):
+    """Per (point, grid) pair: matched mask, score e, u = d/dp of the exponent / -1, A J, J."""
+    c, s = np.cos(p[2]), np.sin(p[2])
+    x, y = src.xy[:, 0], src.xy[:, 1]
+    xp = np.column_stack([c * x - s * y + p[0], s * x + c * y + p[1]])
+    jphi = np.column_stack([-s * x - c * y, c * x - s * y])
+    per_slice = np.diff(m.slice_grids)[src.slice_id]
+    for r in range(int(per_slice.max(initial=0))):
+        use = per_slice > r
+        g = m.slice_grids[src.slice_id[use]] + r
+        ci = _lookup_numpy(m, xp[use], g)
+        yield use, ci, xp[use], jphi[use]
+
+
+def evaluate_numpy(ndt_map: NDTMap, src: SourcePoints, params: np.ndarray) -> np.ndarray:
+    """Plain-numpy twin of :func:`evaluate` (slow; for tests)."""
+    params = np.atleast_2d(params)
+    out = np.zeros((len(params), NACC))
+    total_pairs = int(np.diff(ndt_map.slice_grids)[src.slice_id].sum())
+    for k, p in enumerate(params):
+        acc = out[k]
+        matched = 0
+        for _use, ci, xp, jphi in _terms_numpy(ndt_map, src, p):
+            ok = ci >= 0
+            ci, xp, jphi = ci[ok], xp[ok], jphi[ok]
+            d = xp - ndt_map.means[ci]
+            A = rows_to_2x2(ndt_map.icov[ci])
+            u = np.einsum("nij,nj->ni", A, d)
+            e = np.exp(-0.5 * np.einsum("ni,ni->n", d, u))
+            U = np.column_stack([u, np.einsum("ni,ni->n", u, jphi)])
+            J = np.zeros((len(ci), 2, 3))
+            J[:, 0, 0] = 1.0
+            J[:, 1, 1] = 1.0
+            J[:, :, 2] = jphi
+            JAJ = np.einsum("nki,nkl,nlj->nij", J, A, J)
+            JAJ[:, 2, 2] += u[:, 0] * -jphi[:, 1] + u[:, 1] * jphi[:, 0]  # d^T A d2x'/dphi2
+            H = np.einsum("n,nij->ij", e, JAJ - U[:, :, None] * U[:, None, :])
+            JtJ = np.einsum("n,ni,nj->ij", e**2, U, U)
+            acc[SCORE] += e.sum()
+            acc[GRAD] += (e[:, None] * U).sum(axis=0)
+            acc[HESS] += H[np.triu_indices(3)]
+            acc[JTJ] += JtJ[np.triu_indices(3)]
+            acc[JTR] += ((e * (1 - e))[:, None] * U).sum(axis=0)
+            acc[ERR] += 0.5 * ((1 - e) ** 2).sum()
+            matched += len(ci)
+        acc[ERR] += 0.5 * (total_pairs - matched)
+        acc[MATCHED] = matched
+    return out
+
+
+def point_scores_numpy(
+    ndt_map: NDTMap, src: SourcePoints, p: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Plain-numpy twin of :func:`point_scores`."""
+    p = np.asarray(p, dtype=np.float64)
+    s = np.zeros(len(src))
+    Js = np.zeros((len(src), 3))
+    for use, ci, xp, jphi in _terms_numpy(ndt_map, src, p):
+        ok = ci >= 0
+        idx = np.flatnonzero(use)[ok]
+        d = xp[ok] - ndt_map.means[ci[ok]]
+        u = np.einsum("nij,nj->ni", rows_to_2x2(ndt_map.icov[ci[ok]]), d)
+        e = np.exp(-0.5 * np.einsum("ni,ni->n", d, u))
+        np.add.at(s, idx, e)
+        np.add.at(Js, idx, -e[:, None] * np.column_stack([u, np.einsum("ni,ni->n", u, jphi[ok])]))
+    return s, Js
+
+
+def rows_to_2x2(rows: np.ndarray) -> np.ndarray:
+    """(M,3) rows (a, b, c) to (M,2,2) matrices [[a, b], [b, c]]."""
+    return np.stack([rows[:, [0, 1]], rows[:, [1, 2]]], axis=1)
