@@ -75,8 +75,8 @@ class SearchConfig:
     translation_range: float = 40.0  # starts cover +-range around the aligned slice centroids, m
     translation_step: float = 10.0  # spacing of the translation starts, m
     points_per_slice: int = 1000  # source points per slice used during the search
-    keep_candidates: int = 4  # distinct coarse solutions refined down to the finest cell
-    refine_offsets: bool = True  # restart each finer level from +-half a cell as well
+    keep_candidates: int = 8  # distinct coarse solutions refined down to the finest cell
+    refine_offsets: bool = True  # restart finer levels from +-1/2 and +-1 cell offsets too
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,114 @@
+"""Result objects of a registration (frozen; arrays are float64, metres and degrees)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ndt_cli.transforms import yaw_of
+
+
+@dataclass(frozen=True)
+class LevelStats:
+    """One cell size of the coarse-to-fine schedule, for the winning start."""
+
+    cell_size: float  # m
+    starts: int  # poses optimised in parallel at this level
+    iterations: int  # iterations of the winning start
+    score: float  # final NDT score (sum over slices and points)
+    score_per_point: float
+    converged: bool  # stopped because the score stopped improving
+    time_s: float
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A distinct solution of the start search, refined to the finest cell size."""
+
+    tx: float  # m, reduced frames
+    ty: float
+    yaw_deg: float
+    score: float  # at the finest cell size
+    evidence: float  # sum of its scores over the refined cell sizes (what the winner maximises)
+
+
+@dataclass(frozen=True)
+class RegistrationResult:
+    """Outcome of registering SOURCE onto TARGET.
+
+    ``T_target_source`` (4x4) maps source points into the target frame: ``p_t = T @ p_s``.
+    ``status`` is ``ok``, ``not_converged`` or ``no_overlap``; ``converged`` is ``status == "ok"``.
+    ``hessian`` is the 3x3 Hessian of f = -score in (tx [m], ty [m], yaw [rad]) at the solution.
+    """
+
+    T_target_source: np.ndarray
+    status: str
+    score: float
+    score_per_point: float
+    points_per_slice: tuple[int, ...]
+    levels: tuple[LevelStats, ...]
+    candidates: tuple[Candidate, ...]
+    hessian: np.ndarray
+    ground_z_target: float  # m, target frame
+    ground_z_source: float  # m, source frame
+    runtime_s: float
+    target: str | None = None
+    source: str | None = None
+    warnings: tuple[str, ...] = field(default=())
+
+    @property
+    def converged(self) -> bool:
+        return self.status == "ok"
+
+    @property
+    def iterations(self) -> int:
+        return sum(level.iterations for level in self.levels)
+
+    @property
+    def translation(self) -> np.ndarray:
+        return self.T_target_source[:3, 3].copy()
+
+    @property
+    def yaw_deg(self) -> float:
+        return float(np.degrees(yaw_of(self.T_target_source)))
+
+    @property
+    def ambiguity(self) -> float:
+        """Evidence of the second-best distinct candidate over the best (0: unique, 1: a tie)."""
+        if len(self.candidates) < 2 or self.candidates[0].evidence <= 0:
+            return 0.0
+        return float(self.candidates[1].evidence / self.candidates[0].evidence)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict."""
+        tx, ty, tz = self.translation
+        return {
+            "target": self.target,
+            "source": self.source,
+            "status": self.status,
+            "converged": self.converged,
+            "T_target_source": self.T_target_source.tolist(),
+            "tx": tx,
+            "ty": ty,
+            "tz": tz,
+            "yaw_deg": self.yaw_deg,
+            "score": self.score,
+            "score_per_point": self.score_per_point,
+            "ambiguity": self.ambiguity,
+            "points_per_slice": list(self.points_per_slice),
+            "iterations": self.iterations,
+            "levels": [vars(level) for level in self.levels],
+            "candidates": [vars(c) for c in self.candidates],
+            "hessian": self.hessian.tolist(),
+            "ground_z_target": self.ground_z_target,
+            "ground_z_source": self.ground_z_source,
+            "runtime_s": self.runtime_s,
+            "warnings": list(self.warnings),
+        }
+
+
+def path_str(p: str | Path | None) -> str | None:
+    return None if p is None else str(p)
