@@ -1,0 +1,121 @@
+"""The ndt-register command: outputs, JSON, exit codes, one-line errors, nothing half-written."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from ndt_cli import io, simulate
+from ndt_cli.cli import register_app
+from ndt_cli.transforms import read_matrix, transform_errors
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def pair(tmp_path_factory):
+    d = tmp_path_factory.mktemp("scans")
+    _, scans, poses = simulate.make_sequence(seed=11, n_scans=2)
+    io.write(d / "a.laz", scans[0])
+    io.write(d / "b.ply", scans[1])
+    return d / "a.laz", d / "b.ply", np.linalg.inv(poses[0]) @ poses[1]
+
+
+def test_register_writes_all_outputs(pair, tmp_path):
+    a, b, ref = pair
+    out = tmp_path / "out"
+    res = runner.invoke(register_app, [str(a), str(b), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    T = read_matrix(out / "T_target_source.txt")
+    rot, trans = transform_errors(T, ref)
+    assert rot < 0.3 and trans < 0.15
+    data = json.loads((out / "result.json").read_text())
+    assert data["status"] == "ok" and np.allclose(data["T_target_source"], T, atol=1e-12)
+    lines = (out / "report.csv").read_text().splitlines()
+    assert lines[0].startswith("target,source,tx,ty,tz,yaw_deg") and len(lines) == 2
+    used = yaml.safe_load((out / "config_used.yaml").read_text())
+    assert used["grid"]["cell_sizes"] == [20.0, 10.0, 5.0, 2.0, 1.0]
+    assert not list(out.glob("*.tmp*"))
+
+
+def test_json_on_stdout_and_config_and_init(pair, tmp_path):
+    a, b, ref = pair
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("optimizer:\n  method: lm\n")
+    init = tmp_path / "init.txt"
+    init.write_text("\n".join(" ".join(f"{v:.10f}" for v in row) for row in ref))
+    res = runner.invoke(
+        register_app,
+        [str(a), str(b), "-c", str(cfg), "--init", str(init), "--json", "-o", str(tmp_path / "o")],
+    )
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.stdout)
+    assert data["converged"] is True
+    assert len(data["levels"]) == 5 and data["levels"][0]["starts"] == 25  # no start search
+    assert "method: lm" in (tmp_path / "o" / "config_used.yaml").read_text()
+
+
+def _write(path, text):
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("make", "needle"),
+    [
+        (lambda d: d / "missing.ply", "not found"),
+        (lambda d: _write(d / "scan.abc", "1 2 3\n"), "scan.abc"),
+        (lambda d: _write(d / "empty.xyz", ""), "empty.xyz"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2_and_writes_nothing(pair, tmp_path, make, needle):
+    a, _, _ = pair
+    bad = make(tmp_path)
+    out = tmp_path / "out"
+    res = runner.invoke(register_app, [str(a), str(bad), "--out", str(out), "--quiet"])
+    assert res.exit_code == 2
+    err = res.stderr.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("ndt-register: error:") and needle in err[0]
+    assert "Traceback" not in res.output
+    assert not out.exists()
+
+
+def test_bad_config_names_the_key(pair, tmp_path):
+    a, b, _ = pair
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("grid:\n  cell_size: [4, 2]\n")
+    res = runner.invoke(register_app, [str(a), str(b), "-c", str(cfg), "-o", str(tmp_path / "o")])
+    assert res.exit_code == 2
+    assert "grid.cell_size" in res.stderr and "c.yaml" in res.stderr
+
+
+def test_unwritable_output_is_exit_2(pair, tmp_path):
+    a, b, _ = pair
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    res = runner.invoke(register_app, [str(a), str(b), "-o", str(blocker / "sub")])
+    assert res.exit_code == 2 and "file" in res.stderr
+
+
+def test_failed_registration_is_exit_1(tmp_path):
+    rng = np.random.default_rng(0)
+    ground = np.column_stack([rng.uniform(-20, 20, (20000, 2)), rng.normal(0, 0.01, 20000)])
+    low = np.column_stack([rng.uniform(-10, 10, (3000, 2)), np.full(3000, 1.0)])
+    high = np.column_stack([rng.uniform(-10, 10, (3000, 2)), np.full(3000, 8.0)])
+    io.write(tmp_path / "a.xyz", np.vstack([ground, low]))
+    io.write(tmp_path / "b.xyz", np.vstack([ground, high]))
+    res = runner.invoke(
+        register_app, [str(tmp_path / "a.xyz"), str(tmp_path / "b.xyz"), "-o", str(tmp_path / "o")]
+    )
+    assert res.exit_code == 1 and "no_overlap" in res.stderr
+    assert json.loads((tmp_path / "o" / "result.json").read_text())["status"] == "no_overlap"
+
+
+def test_help_names_target_and_source():
+    res = runner.invoke(register_app, ["--help"])
+    assert res.exit_code == 0
+    assert "TARGET stays fixed" in res.output and "Exit codes" in res.output

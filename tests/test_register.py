@@ -1,0 +1,121 @@
+"""End-to-end registration: known transforms on simulated streets, georeferenced coordinates,
+initial guesses, failure reporting, and the real Velodyne pair."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import shared_data
+
+import ndt_cli
+from ndt_cli import simulate
+from ndt_cli.config import Config
+from ndt_cli.transforms import apply, pose2d_matrix, read_matrix, translation, yaw_of
+
+ROT_TOL_DEG = 0.3
+TRANS_TOL_M = 0.15
+
+
+def planar_errors(T: np.ndarray, T_ref: np.ndarray) -> tuple[float, float]:
+    """|yaw error| (deg) and horizontal translation error (m)."""
+    dyaw = np.degrees(np.angle(np.exp(1j * (yaw_of(T) - yaw_of(T_ref)))))
+    return abs(float(dyaw)), float(np.hypot(*(T[:2, 3] - T_ref[:2, 3])))
+
+
+@pytest.fixture(scope="module")
+def street():
+    """Four scans along a simulated street, any heading, 13-30 m apart."""
+    _, scans, poses = simulate.make_sequence(seed=101, n_scans=4)
+    return scans, poses
+
+
+def relative(poses, i, j):
+    return np.linalg.inv(poses[i]) @ poses[j]
+
+
+@pytest.mark.parametrize("method", ["newton", "lm_fixed", "lm"])
+def test_recovers_every_link_of_a_street_with_each_optimizer(street, method):
+    scans, poses = street
+    cfg = Config().replace(optimizer={"method": method})
+    for i in range(1, len(scans)):
+        result = ndt_cli.register(scans[i - 1], scans[i], cfg)
+        ref = relative(poses, i - 1, i)
+        rot, trans = planar_errors(result.T_target_source, ref)
+        assert result.converged, (method, i, result.status)
+        assert rot < ROT_TOL_DEG and trans < TRANS_TOL_M, (method, i, rot, trans)
+        assert abs(result.T_target_source[2, 3] - ref[2, 3]) < 0.05  # ground difference as tz
+
+
+def test_recovers_a_40_m_link():
+    _, scans, poses = simulate.make_sequence(seed=5, n_scans=2, spacing=(39.0, 40.0))
+    ref = relative(poses, 0, 1)
+    assert np.hypot(*ref[:2, 3]) > 38
+    result = ndt_cli.register(scans[0], scans[1])
+    rot, trans = planar_errors(result.T_target_source, ref)
+    assert rot < ROT_TOL_DEG and trans < TRANS_TOL_M
+
+
+def max_displacement(T: np.ndarray, T_ref: np.ndarray, points: np.ndarray) -> float:
+    """Largest horizontal distance (m) between the points mapped by ``T`` and by ``T_ref``."""
+    return float(np.max(np.hypot(*(apply(T, points) - apply(T_ref, points))[:, :2].T)))
+
+
+def test_georeferenced_coordinates_register_as_accurately_as_local_ones(street):
+    scans, poses = street
+    ref = relative(poses, 0, 1)
+    near = scans[1][np.linalg.norm(scans[1][:, :2], axis=1) < 40]  # points near the scanner
+    local = ndt_cli.register(scans[0], scans[1])
+    err_local = max_displacement(local.T_target_source, ref, near)
+    # target and source in two different georeferenced frames, ~5e6 m from their origins
+    G_t = translation([512_345.0, 5_402_817.0, 87.0])
+    G_s = translation([498_765.0, 5_399_123.0, 91.0]) @ pose2d_matrix(0, 0, 1.0)
+    geo = ndt_cli.register(apply(G_t, scans[0]), apply(G_s, scans[1]))
+    T_ref = G_t @ ref @ np.linalg.inv(G_s)
+    err_geo = max_displacement(geo.T_target_source, T_ref, apply(G_s, near))
+    assert err_local < TRANS_TOL_M
+    assert abs(err_geo - err_local) < 0.005, (err_geo, err_local)
+
+
+def test_initial_guess_skips_the_search(street):
+    scans, poses = street
+    ref = relative(poses, 1, 2)
+    guess = ref @ pose2d_matrix(0.8, -0.6, np.radians(2.0))
+    cfg = Config()
+    result = ndt_cli.register(scans[1], scans[2], cfg, init=guess)
+    assert len(result.levels) == len(cfg.grid.cell_sizes)
+    assert all(level.starts == 25 for level in result.levels)
+    rot, trans = planar_errors(result.T_target_source, ref)
+    assert rot < ROT_TOL_DEG and trans < TRANS_TOL_M
+
+
+def test_no_common_slice_means_no_overlap():
+    rng = np.random.default_rng(0)
+    ground = np.column_stack([rng.uniform(-20, 20, (20000, 2)), rng.normal(0, 0.01, 20000)])
+    low = np.column_stack([rng.uniform(-10, 10, (3000, 2)), np.full(3000, 1.0)])
+    high = np.column_stack([rng.uniform(-10, 10, (3000, 2)), np.full(3000, 8.0)])
+    result = ndt_cli.register(np.vstack([ground, low]), np.vstack([ground, high]))
+    assert result.status == "no_overlap" and not result.converged
+    assert result.score == 0.0
+
+
+def test_identical_scans_give_identity(street):
+    scans, _ = street
+    result = ndt_cli.register(scans[0], scans[0].copy())
+    rot, trans = planar_errors(result.T_target_source, np.eye(4))
+    assert rot < 0.01 and trans < 0.01
+
+
+def test_same_input_gives_bit_identical_result(street):
+    scans, _ = street
+    a = ndt_cli.register(scans[0], scans[1])
+    b = ndt_cli.register(scans[0], scans[1])
+    assert np.array_equal(a.T_target_source, b.T_target_source)
+
+
+def test_real_velodyne_pair_matches_reference():
+    folder = shared_data("koide3_velodyne_pair")
+    ref = read_matrix(folder / "relative_T_target_source.txt")
+    result = ndt_cli.register(folder / "251370668.pcd", folder / "251371071.pcd")
+    rot, trans = planar_errors(result.T_target_source, ref)
+    assert result.converged
+    assert rot < 1.0 and trans < 0.05, (rot, trans)
