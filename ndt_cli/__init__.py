@@ -27,7 +27,7 @@ def register(
     config: Config | str | Path | None = None,
     init: np.ndarray | None = None,
 ) -> RegistrationResult:
-    """Register SOURCE onto TARGET; returns a result whose ``T_target_source`` maps source to target.
+    """Register SOURCE onto TARGET; the result's ``T_target_source`` maps source to target.
 
     ``target``/``source`` are point files (PLY, LAS/LAZ, xyz/txt/csv, PCD) or (N,3) arrays in
     metres; ``config`` a :class:`~ndt_cli.config.Config`, a YAML path or ``None`` for the defaults;

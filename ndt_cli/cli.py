@@ -82,8 +82,12 @@ def register(
 
         report.print_summary(result, Console())
         typer.echo(f"written to {out}/")
-    if not result.converged:
-        typer.echo(f"ndt-register: registration failed: {result.status}", err=True)
+    if not result.ok:
+        reasons = "; ".join(result.warnings)
+        typer.echo(
+            f"ndt-register: registration {result.status}{': ' + reasons if reasons else ''}",
+            err=True,
+        )
         raise typer.Exit(EXIT_REGISTRATION)
 
 

@@ -7,6 +7,7 @@ naming the key. ``configs/default.yaml`` documents every key with its unit.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import types
 import typing
 from dataclasses import dataclass, field
@@ -80,6 +81,15 @@ class SearchConfig:
 
 
 @dataclass(frozen=True)
+class QualityConfig:
+    """Thresholds below which a converged registration is reported as suspect."""
+
+    min_score_per_point: float = 0.12  # final NDT score per source slice point
+    min_overlap: float = 0.3  # share of source slice points inside a target cell
+    max_ambiguity: float = 0.9  # second-best candidate's evidence over the best's
+
+
+@dataclass(frozen=True)
 class Config:
     """All settings of a registration."""
 
@@ -89,6 +99,7 @@ class Config:
     source: SourceConfig = field(default_factory=SourceConfig)
     optimizer: OptimizerConfig = field(default_factory=OptimizerConfig)
     search: SearchConfig = field(default_factory=SearchConfig)
+    quality: QualityConfig = field(default_factory=QualityConfig)
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -98,7 +109,7 @@ class Config:
         return _plain(dataclasses.asdict(self))
 
     def replace(self, **sections: dict[str, Any]) -> Config:
-        """A copy with some keys of some sections changed, e.g. ``replace(grid={"overlap": True})``."""
+        """A copy with some keys of some sections changed: ``replace(grid={"overlap": True})``."""
         data = self.to_dict()
         for name, values in sections.items():
             if name not in data:
@@ -225,7 +236,7 @@ def _validate(c: Config) -> None:
         raise ConfigError("'grid.cell_sizes' must list at least one cell size")
     for i, s in enumerate(cells):
         positive(f"grid.cell_sizes[{i}]", s)
-    if any(b >= a for a, b in zip(cells, cells[1:], strict=False)):
+    if any(b >= a for a, b in itertools.pairwise(cells)):
         raise ConfigError("'grid.cell_sizes' must be strictly decreasing (coarse to fine)")
     if c.grid.min_points < 3:
         raise ConfigError("'grid.min_points' must be >= 3 (a 2D covariance needs 3 points)")
@@ -246,3 +257,9 @@ def _validate(c: Config) -> None:
     positive("search.translation_step", c.search.translation_step)
     positive("search.points_per_slice", c.search.points_per_slice)
     positive("search.keep_candidates", c.search.keep_candidates)
+    q = c.quality
+    if q.min_score_per_point < 0 or not 0 <= q.min_overlap <= 1 or not 0 < q.max_ambiguity <= 1:
+        raise ConfigError(
+            "'quality' thresholds: min_score_per_point >= 0, min_overlap in [0, 1], "
+            "max_ambiguity in (0, 1]"
+        )

@@ -20,7 +20,7 @@ import numpy as np
 
 from ndt_cli.config import Config
 from ndt_cli.grid import NDTMap, build_map
-from ndt_cli.kernels import HESS, SCORE, SourcePoints, evaluate, sym3
+from ndt_cli.kernels import HESS, MATCHED, SCORE, SourcePoints, evaluate, sym3
 from ndt_cli.optimize import optimize
 from ndt_cli.prepare import PreparedScan
 from ndt_cli.result import Candidate, LevelStats, RegistrationResult
@@ -108,6 +108,11 @@ def _offsets(cell: float, enabled: bool) -> np.ndarray:
     return np.column_stack([ox.ravel(), oy.ravel(), np.zeros(ox.size)])
 
 
+def _pairs(ndt: NDTMap, src: SourcePoints) -> int:
+    """(point, grid) pairs: the points times the grids of their slice."""
+    return int(np.diff(ndt.slice_grids)[src.slice_id].sum())
+
+
 def _evaluator(ndt: NDTMap, src: SourcePoints) -> Callable[[np.ndarray], np.ndarray]:
     return lambda P: evaluate(ndt, src, P)
 
@@ -191,19 +196,40 @@ def register_prepared(
     p = cands[0]
     final = evaluate(maps(schedule[-1]), fine, p)[0]
     score = float(final[SCORE]) if len(cands) else 0.0
+    overlap = float(final[MATCHED]) / max(_pairs(maps(schedule[-1]), fine), 1)
+    per_point = score / max(len(fine), 1)
+    ambiguity = evidence[1] / evidence[0] if len(evidence) > 1 and evidence[0] > 0 else 0.0
+    q = cfg.quality
+    warnings = [
+        text
+        for bad, text in [
+            (
+                per_point < q.min_score_per_point,
+                f"score per point {per_point:.3f} < {q.min_score_per_point}",
+            ),
+            (overlap < q.min_overlap, f"overlap {overlap:.2f} < {q.min_overlap}"),
+            (
+                ambiguity > q.max_ambiguity,
+                f"ambiguous: second solution has {ambiguity:.2f} of the best's evidence",
+            ),
+        ]
+        if bad
+    ]
     if score <= 0.0:
         status = "no_overlap"
     elif not converged:
         status = "not_converged"
     else:
-        status = "ok"
+        status = "suspect" if warnings else "ok"
     T_local = pose2d_matrix(p[0], p[1], p[2])
     T = translation(target.reduction) @ T_local @ translation(-source.reduction)
     return RegistrationResult(
         T_target_source=T,
         status=status,
+        converged=converged,
         score=score,
-        score_per_point=score / max(len(fine), 1),
+        score_per_point=per_point,
+        overlap=overlap,
         points_per_slice=tuple(int(n) for n in fine.per_slice(len(source.slices))),
         levels=tuple(levels),
         candidates=tuple(
@@ -218,4 +244,5 @@ def register_prepared(
         runtime_s=time.perf_counter() - t_start,
         target=target.label,
         source=source.label,
+        warnings=tuple(warnings),
     )

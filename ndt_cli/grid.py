@@ -24,8 +24,8 @@ MAX_INDEX_CELLS = 100_000_000  # dense index entries over all grids (400 MB of i
 class NDTMap:
     """All slices' NDT grids at one cell size, as flat arrays.
 
-    Grid g covers ``grid_shape[g] = (nx, ny)`` cells of ``cell_size`` metres from
-    ``grid_origin[g]`` (x0, y0); the cell (ix, iy) has entry ``cell_index[grid_offset[g] + ix*ny + iy]``,
+    Grid g covers ``grid_shape[g] = (nx, ny)`` cells of ``cell_size`` metres from ``grid_origin[g]``
+    (x0, y0); cell (ix, iy) has the entry ``cell_index[grid_offset[g] + ix*ny + iy]``,
     the row of its normal distribution in ``means`` / ``icov`` or -1 when it has too few points.
     Slice k owns the grids ``slice_grids[k] .. slice_grids[k+1]-1`` (1, or 4 with overlap).
     ``icov`` rows hold the inverse covariance (a, b, c) of [[a, b], [b, c]] in 1/m^2.

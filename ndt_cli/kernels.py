@@ -276,7 +276,7 @@ def evaluate(ndt_map: NDTMap, src: SourcePoints, params: np.ndarray) -> np.ndarr
 def point_scores(
     ndt_map: NDTMap, src: SourcePoints, p: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per point: score ``s`` (N,) summed over its slice's grids and its Jacobian ``ds/dp`` (N,3)."""
+    """Per point: score ``s`` (N,) summed over its slice's grids, and its Jacobian ds/dp (N,3)."""
     p = np.ascontiguousarray(p, dtype=np.float64).reshape(3)
     s = np.zeros(len(src))
     J = np.zeros((len(src), 3))

@@ -1,10 +1,10 @@
-"""Local solvers for the planar pose p = (tx, ty, phi) (metres, radians), run on many starts at once.
+"""Local solvers for the planar pose p = (tx, ty, phi) (metres, radians), many starts at once.
 
-All three take an ``evaluate(P) -> accumulators`` callback (see :mod:`ndt_cli.kernels`) that scores a
-batch of poses in one kernel call, and stop a start when its score has not improved for
+All three take an ``evaluate(P) -> accumulators`` callback (see :mod:`ndt_cli.kernels`) that
+scores a batch of poses in one kernel call, and stop a start when its score has not improved for
 ``patience`` iterations or after ``max_iterations``. Each returns, per start, the pose with the
 best score it visited. Steps are capped at ``max_step`` cells of translation and
-``max_rotation_step_deg`` of rotation (the score is flat outside a cell, so longer steps are guesses).
+``max_rotation_step_deg`` of rotation (the score is flat outside a cell: longer steps are guesses).
 
 - ``newton`` minimises f(p) = -score(p) with H dp = -g. H is made positive definite by replacing
   its eigenvalues by their absolute values, floored at 1e-6 of the largest (a saddle then gives a

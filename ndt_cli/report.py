@@ -28,6 +28,7 @@ REPORT_COLUMNS = (
     "yaw_deg",
     "score",
     "score_per_point",
+    "overlap",
     "points_per_slice",
     "iterations_per_level",
     "converged",
@@ -61,6 +62,7 @@ def report_row(result: RegistrationResult) -> dict[str, Any]:
         "yaw_deg": f"{result.yaw_deg:.6f}",
         "score": f"{result.score:.4f}",
         "score_per_point": f"{result.score_per_point:.6f}",
+        "overlap": f"{result.overlap:.4f}",
         "points_per_slice": ";".join(str(n) for n in result.points_per_slice),
         "iterations_per_level": ";".join(str(level.iterations) for level in result.levels),
         "converged": str(result.converged).lower(),
@@ -104,8 +106,11 @@ def print_summary(result: RegistrationResult, console: Any) -> None:
     head.add_row("translation (m)", f"{tx:.4f}  {ty:.4f}  {tz:.4f}")
     head.add_row("yaw (deg)", f"{result.yaw_deg:.4f}")
     head.add_row("score / point", f"{result.score_per_point:.4f}")
+    head.add_row("overlap", f"{result.overlap:.3f}")
     head.add_row("second candidate / best", f"{result.ambiguity:.3f}")
     head.add_row("runtime (s)", f"{result.runtime_s:.2f}")
+    for warning in result.warnings:
+        head.add_row("warning", warning)
     console.print(head)
     levels = Table("cell (m)", "starts", "iterations", "score", "score/point", "time (s)")
     for lv in result.levels:

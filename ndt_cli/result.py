@@ -40,14 +40,18 @@ class RegistrationResult:
     """Outcome of registering SOURCE onto TARGET.
 
     ``T_target_source`` (4x4) maps source points into the target frame: ``p_t = T @ p_s``.
-    ``status`` is ``ok``, ``not_converged`` or ``no_overlap``; ``converged`` is ``status == "ok"``.
+    ``status`` is ``ok``; ``suspect`` (converged, but below a quality threshold: see ``warnings``);
+    ``not_converged``; or ``no_overlap`` (score zero). ``converged``: the finest level stopped
+    because its score stopped improving.
     ``hessian`` is the 3x3 Hessian of f = -score in (tx [m], ty [m], yaw [rad]) at the solution.
     """
 
     T_target_source: np.ndarray
     status: str
+    converged: bool
     score: float
     score_per_point: float
+    overlap: float  # share of source slice points inside a target cell at the finest level
     points_per_slice: tuple[int, ...]
     levels: tuple[LevelStats, ...]
     candidates: tuple[Candidate, ...]
@@ -60,7 +64,7 @@ class RegistrationResult:
     warnings: tuple[str, ...] = field(default=())
 
     @property
-    def converged(self) -> bool:
+    def ok(self) -> bool:
         return self.status == "ok"
 
     @property
@@ -97,6 +101,7 @@ class RegistrationResult:
             "yaw_deg": self.yaw_deg,
             "score": self.score,
             "score_per_point": self.score_per_point,
+            "overlap": self.overlap,
             "ambiguity": self.ambiguity,
             "points_per_slice": list(self.points_per_slice),
             "iterations": self.iterations,

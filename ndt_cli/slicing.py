@@ -70,7 +70,7 @@ def voxel_filter_2d(xy: np.ndarray, voxel: float) -> np.ndarray:
 
 
 def subsample(xy: np.ndarray, cap: int, seed: int = 0) -> np.ndarray:
-    """At most ``cap`` points, drawn without replacement by a fixed-seed generator (deterministic)."""
+    """At most ``cap`` points, drawn without replacement by a fixed-seed generator."""
     if len(xy) <= cap:
         return xy
     idx = np.random.default_rng(seed).choice(len(xy), size=cap, replace=False)

@@ -19,7 +19,7 @@ def _room(rng: np.random.Generator) -> np.ndarray:
         t = rng.uniform(0, 1, int(np.hypot(*(b - a)) * 40))[:, None]
         segs.append(a + t * (b - a))
     pillars = rng.normal([[10, 15]], 0.3, (400, 2))
-    return np.concatenate(segs + [pillars]) + rng.normal(0, 0.02, (sum(map(len, segs)) + 400, 2))
+    return np.concatenate([*segs, pillars]) + rng.normal(0, 0.02, (sum(map(len, segs)) + 400, 2))
 
 
 @pytest.mark.parametrize("method", ["newton", "lm_fixed", "lm"])
@@ -62,8 +62,10 @@ def test_patience_and_iteration_limit():
     src = SourcePoints.from_slices([_room(rng)])
     ndt = build_map([target], 2.0)
     res = optimize(
-        lambda P: evaluate(ndt, src, P), np.array([[2.0, 1.0, 0.1]]),
-        OptimizerConfig(max_iterations=2, patience=50), 2.0,
+        lambda P: evaluate(ndt, src, P),
+        np.array([[2.0, 1.0, 0.1]]),
+        OptimizerConfig(max_iterations=2, patience=50),
+        2.0,
     )
     assert res.iterations[0] == 2 and not res.converged[0]
     assert res.trace.shape == (2, 1)

@@ -41,7 +41,7 @@ def test_recovers_every_link_of_a_street_with_each_optimizer(street, method):
         result = ndt_cli.register(scans[i - 1], scans[i], cfg)
         ref = relative(poses, i - 1, i)
         rot, trans = planar_errors(result.T_target_source, ref)
-        assert result.converged, (method, i, result.status)
+        assert result.ok, (method, i, result.status, result.warnings)
         assert rot < ROT_TOL_DEG and trans < TRANS_TOL_M, (method, i, rot, trans)
         assert abs(result.T_target_source[2, 3] - ref[2, 3]) < 0.05  # ground difference as tz
 
@@ -94,7 +94,7 @@ def test_no_common_slice_means_no_overlap():
     low = np.column_stack([rng.uniform(-10, 10, (3000, 2)), np.full(3000, 1.0)])
     high = np.column_stack([rng.uniform(-10, 10, (3000, 2)), np.full(3000, 8.0)])
     result = ndt_cli.register(np.vstack([ground, low]), np.vstack([ground, high]))
-    assert result.status == "no_overlap" and not result.converged
+    assert result.status == "no_overlap" and not result.ok
     assert result.score == 0.0
 
 
@@ -117,5 +117,13 @@ def test_real_velodyne_pair_matches_reference():
     ref = read_matrix(folder / "relative_T_target_source.txt")
     result = ndt_cli.register(folder / "251370668.pcd", folder / "251371071.pcd")
     rot, trans = planar_errors(result.T_target_source, ref)
-    assert result.converged
+    assert result.ok, result.warnings
     assert rot < 1.0 and trans < 0.05, (rot, trans)
+
+
+def test_two_different_streets_are_suspect_not_ok(street):
+    scans, _ = street
+    _, other, _ = simulate.make_sequence(seed=77, n_scans=1)
+    result = ndt_cli.register(scans[0], other[0])
+    assert result.status == "suspect" and not result.ok
+    assert result.warnings and "score per point" in result.warnings[0]
