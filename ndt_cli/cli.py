@@ -92,3 +92,106 @@ def register(
 
 
 __all__ = ["EXIT_INPUT", "EXIT_REGISTRATION", "register_app"]
+
+
+chain_app = typer.Typer(add_completion=False, pretty_exceptions_enable=False)
+
+_CHAIN_HELP = "\n\n".join(
+    [
+        "Register a sequence of scans along a street and chain them into one frame.",
+        "Scans are sorted in natural order of their names (scan_2 before scan_10); each scan is "
+        "registered against the previous readable one. The first scan (or --anchor K) defines "
+        "the world frame; poses.txt holds T_world_scan of every scan.",
+        "Exit codes: 0 every link ok, 1 a link failed or is suspect (see pairs.csv), "
+        "2 bad input or config.",
+        "Examples:",
+        "  ndt-chain scans/*.laz --out street/ --jobs 2",
+        "  ndt-chain scans/*.laz --out street/ --resume   (after an interruption)",
+    ]
+)
+
+
+@chain_app.command(help=_CHAIN_HELP, no_args_is_help=True)
+def chain(
+    scans: Annotated[list[Path], typer.Argument(help="Scan files (at least two).")],
+    config: Annotated[Path | None, typer.Option("--config", "-c", help="YAML config file.")] = None,
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("ndt_chain"),
+    jobs: Annotated[
+        int | None, typer.Option("--jobs", "-j", help="Parallel processes [default: cores].")
+    ] = None,
+    resume: Annotated[
+        bool, typer.Option(help="Reuse finished links whose inputs and config are unchanged.")
+    ] = False,
+    anchor: Annotated[int, typer.Option(help="Index of the scan that defines the world.")] = 0,
+    json_out: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print errors only.")] = False,
+    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="More log messages.")] = False,
+    debug: Annotated[bool, typer.Option(help="Show tracebacks of errors.")] = False,
+) -> None:
+    _setup_logging(quiet or json_out, verbose)
+    try:
+        import time
+
+        from ndt_cli import config as config_mod
+        from ndt_cli.chain import natural_sort, run_chain
+        from ndt_cli.chain_report import summary, write_chain_outputs, write_topview
+        from ndt_cli.errors import ConfigError, InputError, OutputError
+
+        cfg = config_mod.load(config)
+        paths = natural_sort(scans)
+        if len(paths) < 2:
+            raise InputError("ndt-chain needs at least two scans")
+        if not 0 <= anchor < len(paths):
+            raise ConfigError(f"--anchor {anchor} is not a scan index (0..{len(paths) - 1})")
+        if jobs is not None and jobs < 1:
+            raise ConfigError("--jobs must be >= 1")
+        if out.exists() and not out.is_dir():
+            raise OutputError("output path exists and is not a folder", out)
+        t0 = time.perf_counter()
+        with _Progress(len(paths) - 1, enabled=not (quiet or json_out)) as advance:
+            result = run_chain(
+                paths, cfg, out, jobs=jobs, resume=resume, anchor=anchor, on_progress=advance
+            )
+        runtime = time.perf_counter() - t0
+        write_chain_outputs(out, result, cfg, runtime)
+        write_topview(out, result, cfg)
+    except NdtError as exc:
+        if debug:
+            raise
+        raise _fail(exc, "ndt-chain") from None
+    if json_out:
+        from ndt_cli.report import to_json
+
+        typer.echo(to_json(summary(result, runtime)), nl=False)
+    elif not quiet:
+        from rich.console import Console
+
+        from ndt_cli.chain_report import print_chain_summary
+
+        print_chain_summary(result, Console())
+        typer.echo(f"written to {out}/")
+    if not result.ok:
+        raise typer.Exit(EXIT_REGISTRATION)
+
+
+class _Progress:
+    """A rich progress bar over links, shown only on a terminal; yields the advance callback."""
+
+    def __init__(self, total: int, enabled: bool) -> None:
+        self.total = total
+        self.enabled = enabled and sys.stdout.isatty()
+        self.bar = None
+
+    def __enter__(self):
+        if not self.enabled:
+            return lambda link: None
+        from rich.progress import Progress
+
+        self.bar = Progress()
+        self.bar.start()
+        task = self.bar.add_task("links", total=self.total)
+        return lambda link: self.bar.advance(task)
+
+    def __exit__(self, *exc: object) -> None:
+        if self.bar is not None:
+            self.bar.stop()

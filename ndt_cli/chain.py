@@ -1,0 +1,324 @@
+"""Register a sequence of scans pair by pair and chain the links into one frame.
+
+Scan i is registered against scan i-1 (the last readable scan before it). The first scan, or
+``anchor``, defines the world frame: ``T_world_scan`` of every other scan is the product of the
+links between them. Links are independent and run in parallel processes; each finished link is
+written at once (``links/NNNN.json``, atomically) with hashes of its inputs and config, so an
+interrupted chain resumes where it stopped and gives the same outputs.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import multiprocessing
+import os
+import re
+from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ndt_cli import atomic
+from ndt_cli.config import Config, dump
+from ndt_cli.errors import NdtError
+from ndt_cli.report import to_json
+
+log = logging.getLogger(__name__)
+
+LINK_FOLDER = "links"
+_HASH_CHUNK = 1 << 20
+
+
+def natural_key(path: str | Path) -> list[Any]:
+    """Sort key: digit runs compare as numbers, so scan_2 comes before scan_10."""
+    return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", str(path))]
+
+
+def natural_sort(paths: Sequence[str | Path]) -> list[Path]:
+    """Paths in natural order of their file names, then folders (see :func:`natural_key`)."""
+    return [
+        Path(p) for p in sorted(paths, key=lambda p: (natural_key(Path(p).name), natural_key(p)))
+    ]
+
+
+def file_hash(path: Path) -> str:
+    """SHA-256 of a file's bytes ('missing' when it cannot be read)."""
+    h = hashlib.sha256()
+    try:
+        with open(path, "rb") as fh:
+            while chunk := fh.read(_HASH_CHUNK):
+                h.update(chunk)
+    except OSError:
+        return "missing"
+    return h.hexdigest()
+
+
+@dataclass(frozen=True)
+class Link:
+    """One registration of the chain: ``source`` onto ``target`` (indices into the scan list)."""
+
+    index: int
+    target: int
+    source: int
+    status: str  # ok | suspect | not_converged | no_overlap | failed
+    reason: str = ""
+    T_target_source: np.ndarray | None = None
+    score: float = float("nan")
+    score_per_point: float = float("nan")
+    overlap: float = float("nan")
+    iterations: int = 0
+    converged: bool = False
+    runtime_s: float = 0.0
+    key: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    def to_dict(self) -> dict[str, Any]:
+        d = dict(vars(self))
+        d["T_target_source"] = (
+            None if self.T_target_source is None else self.T_target_source.tolist()
+        )
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Link:
+        d = dict(d)
+        T = d.pop("T_target_source")
+        return cls(T_target_source=None if T is None else np.array(T, dtype=float), **d)
+
+
+@dataclass(frozen=True)
+class ChainResult:
+    """All links, and ``T_world_scan`` per scan (None when a failed link cuts it off)."""
+
+    scans: tuple[Path, ...]
+    links: tuple[Link, ...]
+    poses: tuple[np.ndarray | None, ...]
+    anchor: int
+    unreadable: dict[int, str]
+    previews: dict[int, np.ndarray]  # prepared scans: thinned slice points (x, y, z), scan frame
+    reused: tuple[int, ...] = ()  # links taken from an earlier run (--resume)
+
+    @property
+    def ok(self) -> bool:
+        return not self.unreadable and all(link.ok for link in self.links)
+
+
+def preview(scan: Any, max_points: int = 4000) -> np.ndarray:
+    """Thinned slice points of a prepared scan as (x, y, z) in the scan's own frame (metres)."""
+    xy = np.concatenate(scan.slices)
+    step = max(1, len(xy) // max_points)
+    xyz = np.column_stack([xy[::step], np.zeros(len(xy[::step]))])
+    return xyz + scan.reduction
+
+
+# ----------------------------------------------------------------------------- workers
+
+
+def _init_worker(threads: int) -> None:
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    import numba
+
+    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+
+
+def _prepare_scan(path: Path, cfg: Config) -> Any:
+    """A worker task: the prepared scan, or the one-line error text when it cannot be used."""
+    from ndt_cli.prepare import load_and_prepare
+
+    try:
+        return load_and_prepare(path, cfg)
+    except NdtError as exc:
+        return str(exc)
+
+
+def _register_link(
+    index: int, i: int, j: int, target: Any, source: Any, cfg: Config, key: str
+) -> Link:
+    """A worker task: register prepared scan ``source`` (j) onto ``target`` (i)."""
+    from ndt_cli.engine import register_prepared
+
+    try:
+        r = register_prepared(target, source, cfg)
+    except NdtError as exc:
+        return Link(index, i, j, "failed", reason=str(exc), key=key)
+    return Link(
+        index,
+        i,
+        j,
+        r.status,
+        reason="; ".join(r.warnings),
+        T_target_source=r.T_target_source,
+        score=r.score,
+        score_per_point=r.score_per_point,
+        overlap=r.overlap,
+        iterations=r.iterations,
+        converged=r.converged,
+        runtime_s=r.runtime_s,
+        key=key,
+    )
+
+
+# ----------------------------------------------------------------------------- driver
+
+
+def plan_links(n_scans: int, unreadable: set[int]) -> list[tuple[int, int]]:
+    """(target, source) per scan after the first: the last readable scan before it as target.
+
+    Link ``k`` has source scan ``k + 1``; a link whose source cannot be read fails, and the next
+    scan is registered against the last readable one instead.
+    """
+    pairs = []
+    last = 0
+    for j in range(1, n_scans):
+        pairs.append((last, j))
+        if j not in unreadable or last in unreadable:
+            last = j
+    return pairs
+
+
+def compose_poses(n_scans: int, links: Sequence[Link], anchor: int) -> list[np.ndarray | None]:
+    """``T_world_scan`` per scan from the links (world = the anchor scan's frame).
+
+    A link without a transform (failed) leaves its source without a pose; scans that were
+    registered against a scan without a pose get none either.
+    """
+    poses: list[np.ndarray | None] = [None] * n_scans
+    poses[anchor] = np.eye(4)
+    with_T = [link for link in links if link.T_target_source is not None]
+    for link in sorted(with_T, key=lambda k: k.source):  # forward: T_w_j = T_w_i @ T_i_j
+        if link.source > anchor and poses[link.target] is not None:
+            poses[link.source] = poses[link.target] @ link.T_target_source
+    for link in sorted(with_T, key=lambda k: -k.source):  # backward: T_w_i = T_w_j @ inv(T_i_j)
+        if link.source <= anchor and poses[link.source] is not None:
+            poses[link.target] = poses[link.source] @ np.linalg.inv(link.T_target_source)
+    return poses
+
+
+def link_key(target_hash: str, source_hash: str, cfg_text: str) -> str:
+    """Identity of a link's inputs: both files' hashes and the config."""
+    return hashlib.sha256(f"{target_hash}\n{source_hash}\n{cfg_text}".encode()).hexdigest()
+
+
+def _load_finished(out: Path, index: int, key: str) -> Link | None:
+    path = out / LINK_FOLDER / f"{index:04d}.json"
+    try:
+        import json
+
+        link = Link.from_dict(json.loads(path.read_text(encoding="utf-8")))
+    except (OSError, ValueError, TypeError, KeyError):
+        return None
+    return link if link.key == key else None
+
+
+def run_chain(
+    scans: Sequence[str | Path],
+    cfg: Config,
+    out: str | Path,
+    *,
+    jobs: int | None = None,
+    resume: bool = False,
+    anchor: int = 0,
+    on_progress: Callable[[Link], None] | None = None,
+) -> ChainResult:
+    """Register the scans in the order given, write each link as it finishes, compose poses."""
+    paths = [Path(p) for p in scans]
+    out = Path(out)
+    n = len(paths)
+    jobs = max(1, jobs or os.cpu_count() or 1)
+    threads = max(1, (os.cpu_count() or 1) // jobs)
+    cfg_text = dump(cfg)
+    hashes = [file_hash(p) for p in paths]
+
+    unreadable: dict[int, str] = {}
+    finished: dict[int, Link] = {}
+
+    def plan() -> tuple[list[tuple[int, int]], list[str]]:
+        pairs = plan_links(n, set(unreadable))
+        return pairs, [link_key(hashes[i], hashes[j], cfg_text) for i, j in pairs]
+
+    def report(link: Link) -> None:
+        finished[link.index] = link
+        if on_progress:
+            on_progress(link)
+
+    # spawn, not fork: a forked child of a process whose Numba threads already ran can deadlock
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(
+        max_workers=jobs, mp_context=context, initializer=_init_worker, initargs=(threads,)
+    ) as pool:
+        pairs, keys = plan()
+        if resume:
+            for index, key in enumerate(keys):
+                link = _load_finished(out, index, key)
+                if link is not None and (link.target, link.source) == pairs[index]:
+                    finished[index] = link
+        # read and slice each scan that an unfinished link needs, once, in parallel
+        needed = sorted({s for k, pair in enumerate(pairs) if k not in finished for s in pair})
+        tasks = [pool.submit(_prepare_scan, paths[i], cfg) for i in needed]
+        prepared: dict[int, Any] = {}
+        for i, fut in zip(needed, tasks, strict=True):
+            value = fut.result()
+            if isinstance(value, str):
+                unreadable[i] = value
+            else:
+                prepared[i] = value
+        if unreadable:  # re-plan around the scans that could not be read
+            pairs, keys = plan()
+            finished = {k: v for k, v in finished.items() if v.key == keys[k]}
+        reused = set(finished)
+        for link in list(finished.values()):
+            report(link)
+        futures: dict[Future, int] = {}
+        for index, (i, j) in enumerate(pairs):
+            if index in finished:
+                continue
+            if i in unreadable or j in unreadable:
+                report(
+                    Link(
+                        index,
+                        i,
+                        j,
+                        "failed",
+                        reason=unreadable.get(j) or unreadable[i],
+                        key=keys[index],
+                    )
+                )
+                continue
+            task = pool.submit(
+                _register_link, index, i, j, prepared[i], prepared[j], cfg, keys[index]
+            )
+            futures[task] = index
+        while futures:
+            done, _ = wait(futures, return_when=FIRST_COMPLETED)
+            for fut in done:
+                index = futures.pop(fut)
+                try:
+                    link = fut.result()
+                except Exception as exc:  # a crashed worker fails its link, not the chain
+                    i, j = pairs[index]
+                    report(
+                        Link(index, i, j, "failed", reason=f"worker error: {exc}", key=keys[index])
+                    )
+                    continue
+                atomic.write_text(out / LINK_FOLDER / f"{index:04d}.json", to_json(link.to_dict()))
+                report(link)
+
+    links = tuple(finished[k] for k in sorted(finished))
+    for reason in dict(sorted(unreadable.items())).values():
+        log.warning("%s", reason)
+    return ChainResult(
+        scans=tuple(paths),
+        links=links,
+        poses=tuple(compose_poses(n, links, anchor)),
+        anchor=anchor,
+        unreadable=dict(sorted(unreadable.items())),
+        previews={i: preview(p) for i, p in sorted(prepared.items())},
+        reused=tuple(sorted(reused)),
+    )

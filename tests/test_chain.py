@@ -1,0 +1,167 @@
+"""ndt-chain: chained poses against ground truth, parallel = serial, kill and resume,
+unreadable scans, and the real MULLS street sequence."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from conftest import shared_data
+from typer.testing import CliRunner
+
+from ndt_cli import io, simulate
+from ndt_cli.chain import natural_sort, plan_links
+from ndt_cli.cli import chain_app
+from ndt_cli.transforms import read_matrix, read_pose_list, yaw_of
+
+runner = CliRunner()
+CHAIN = [sys.executable, "-c", "from ndt_cli.cli import chain_app; chain_app()"]
+
+
+def planar_errors(T, T_ref):
+    dyaw = np.degrees(np.angle(np.exp(1j * (yaw_of(T) - yaw_of(T_ref)))))
+    return abs(float(dyaw)), float(np.hypot(*(T[:2, 3] - T_ref[:2, 3])))
+
+
+@pytest.fixture(scope="module")
+def sequence(tmp_path_factory):
+    d = tmp_path_factory.mktemp("seq")
+    _, scans, poses = simulate.make_sequence(
+        seed=21, n_scans=4, spacing=(13.0, 17.0), scan_kwargs={"n_azimuth": 1000}
+    )
+    files = []
+    for k, pts in enumerate(scans):
+        files.append(d / f"scan_{k}.laz")
+        io.write(files[-1], pts)
+    return files, poses
+
+
+def world_gt(poses):
+    """Ground truth T_world_scan with scan 0 as the world."""
+    inv0 = np.linalg.inv(poses[0])
+    return [inv0 @ T for T in poses]
+
+
+def run(files, out, *extra):
+    return runner.invoke(chain_app, [*map(str, files), "--out", str(out), "--quiet", *extra])
+
+
+def outputs(out):
+    """The chain's outputs that must not depend on jobs or interruption (no timings)."""
+    pairs = [line.rsplit(",", 3)[0] for line in (out / "pairs.csv").read_text().splitlines()]
+    cols = (out / "pairs.csv").read_text().splitlines()[0].split(",")
+    keep = [i for i, c in enumerate(cols) if c != "runtime_s"]
+    pairs = [
+        [row.split(",")[i] for i in keep] for row in (out / "pairs.csv").read_text().splitlines()
+    ]
+    links = {p.name: p.read_text() for p in sorted(out.glob("T_*.txt"))}
+    return pairs, (out / "poses.txt").read_text(), (out / "poses.csv").read_text(), links
+
+
+def test_chain_recovers_ground_truth_and_jobs_do_not_matter(sequence, tmp_path):
+    files, poses = sequence
+    res1 = run(files, tmp_path / "j1", "--jobs", "1")
+    assert res1.exit_code == 0, res1.output
+    est = read_pose_list(tmp_path / "j1" / "poses.txt")
+    gt = world_gt(poses)
+    for k, f in enumerate(files):
+        rot, trans = planar_errors(est[f.name], gt[k])
+        assert rot < 0.3 and trans < 0.15 * max(k, 1), (k, rot, trans)
+    for k in range(1, len(files)):
+        T = read_matrix(tmp_path / "j1" / f"T_scan_{k - 1}_scan_{k}.txt")
+        rot, trans = planar_errors(T, np.linalg.inv(poses[k - 1]) @ poses[k])
+        assert rot < 0.3 and trans < 0.15
+    summary = json.loads((tmp_path / "j1" / "summary.json").read_text())
+    assert summary["ok"] == 3 and summary["all_ok"] is True
+    assert (tmp_path / "j1" / "config_used.yaml").exists()
+    res2 = run(files, tmp_path / "j2", "--jobs", "2")
+    assert res2.exit_code == 0
+    assert outputs(tmp_path / "j1") == outputs(tmp_path / "j2")
+
+
+def test_anchor_defines_the_world(sequence, tmp_path):
+    files, poses = sequence
+    assert run(files, tmp_path / "a", "--anchor", "2", "--jobs", "2").exit_code == 0
+    est = read_pose_list(tmp_path / "a" / "poses.txt")
+    assert np.allclose(est[files[2].name], np.eye(4))
+    ref = np.linalg.inv(poses[2]) @ poses[0]
+    rot, trans = planar_errors(est[files[0].name], ref)
+    assert rot < 0.5 and trans < 0.3
+
+
+def test_unreadable_scan_in_the_middle_fails_its_link_and_the_chain_goes_on(sequence, tmp_path):
+    files, poses = sequence
+    bad = tmp_path / "scan_1.laz"
+    bad.write_bytes(files[1].read_bytes()[:5000])  # truncated
+    chain = [files[0], bad, files[2], files[3]]
+    res = run(chain, tmp_path / "o", "--jobs", "2")
+    assert res.exit_code == 1
+    rows = (tmp_path / "o" / "pairs.csv").read_text().splitlines()
+    assert "failed" in rows[1] and "scan_1.laz" in rows[1]
+    assert rows[2].split(",")[1:3] == ["scan_0.laz", "scan_2.laz"]  # next pair it can form
+    est = read_pose_list(tmp_path / "o" / "poses.txt")
+    assert "scan_1.laz" not in est
+    rot, trans = planar_errors(est["scan_3.laz"], world_gt(poses)[3])
+    assert rot < 0.5 and trans < 0.3
+
+
+def test_killed_chain_resumes_to_the_same_outputs(sequence, tmp_path):
+    files, _ = sequence
+    files = files + files[:2]  # a longer chain: 5 links
+    clean = tmp_path / "clean"
+    assert run(files, clean, "--jobs", "1").exit_code in (0, 1)
+    out = tmp_path / "killed"
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    proc = subprocess.Popen(
+        [*CHAIN, *map(str, files), "--out", str(out), "--jobs", "1", "--quiet"],
+        env=env, start_new_session=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and len(list((out / "links").glob("*.json"))) < 2:
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    done_before = sorted(p.name for p in (out / "links").glob("*.json"))
+    assert 2 <= len(done_before) < 5, done_before
+    assert not (out / "pairs.csv").exists()
+    res = run(files, out, "--jobs", "2", "--resume")
+    assert res.exit_code in (0, 1)
+    assert outputs(out) == outputs(clean)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["reused"] == len(done_before)
+
+
+def test_natural_sort_and_link_plan():
+    names = ["b/s10.las", "a/s2.las", "S1.las", "c/s2b.las", "b/s1.las"]
+    assert [str(p) for p in natural_sort(names)] == [
+        "b/s1.las",
+        "S1.las",
+        "a/s2.las",
+        "c/s2b.las",
+        "b/s10.las",
+    ]
+    assert plan_links(5, set()) == [(0, 1), (1, 2), (2, 3), (3, 4)]
+    assert plan_links(5, {2}) == [(0, 1), (1, 2), (1, 3), (3, 4)]
+
+
+def test_bad_chain_input_is_exit_2(tmp_path):
+    res = runner.invoke(chain_app, [str(tmp_path / "only.laz"), "--quiet"])
+    assert res.exit_code == 2 and "at least two" in res.stderr
+
+
+def test_mulls_street_sequence_matches_icp_reference(tmp_path):
+    folder = shared_data("mulls_demo_hdl64_sequence")
+    refs = np.loadtxt(folder / "reference_icp_relative_4x4.txt").reshape(-1, 4, 4)
+    files = sorted(folder.glob("*.pcd"))
+    res = run(files, tmp_path / "m", "--jobs", "2")
+    assert res.exit_code == 0, res.output
+    for k in range(1, len(files)):
+        T = read_matrix(tmp_path / "m" / f"T_{files[k - 1].stem}_{files[k].stem}.txt")
+        rot, trans = planar_errors(T, refs[k - 1])
+        assert rot < 0.5 and trans < 0.10, (k, rot, trans)
