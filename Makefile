@@ -14,8 +14,10 @@ $(STAMP): pyproject.toml
 	@touch $(STAMP)
 
 demo: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 $(BIN)/ndt-register sample_data/scan_00.laz sample_data/scan_01.laz --out ndt_results/demo
-	$(BIN)/python tools/demo_check.py ndt_results/demo sample_data/poses_T_world_scan.txt scan_00.laz scan_01.laz
+	OPENBLAS_NUM_THREADS=1 $(BIN)/ndt-register sample_data/scan_00.laz sample_data/scan_01.laz --out ndt_results/pair
+	$(BIN)/python tools/demo_check.py pair ndt_results/pair sample_data/poses_T_world_scan.txt scan_00.laz scan_01.laz
+	OPENBLAS_NUM_THREADS=1 $(BIN)/ndt-chain sample_data/*.laz --out ndt_results/chain --jobs 2
+	$(BIN)/python tools/demo_check.py chain ndt_results/chain sample_data/poses_T_world_scan.txt
 
 test: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q
@@ -31,4 +33,4 @@ sample-data: $(STAMP)
 	$(BIN)/python tools/make_sample_data.py --out sample_data
 
 clean:
-	rm -rf $(VENV) ndt_results .pytest_cache
+	rm -rf $(VENV) ndt_results ndt_chain .pytest_cache

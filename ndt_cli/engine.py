@@ -161,7 +161,7 @@ def register_prepared(
         schedule = cells
 
     scores = np.zeros(len(cands))
-    evidence = np.zeros(len(cands))  # sum of a candidate's scores over the refined levels
+    evidence = np.zeros(len(cands))  # sum over refined levels of score / best score of the level
     converged = False
     for cell in schedule:
         t0 = time.perf_counter()
@@ -173,7 +173,7 @@ def register_prepared(
         flat = np.arange(len(cands)) * len(off) + pick
         cands = res.params[flat]
         scores = res.score[flat]
-        evidence += scores
+        evidence += scores / max(scores.max(), 1e-300)
         w = flat[int(np.argmax(scores))]
         converged = bool(res.converged[w])
         levels.append(
@@ -188,9 +188,9 @@ def register_prepared(
             )
         )
 
-    # The winner has the best score summed over all refined cell sizes: at the finest cell alone
-    # a pose slid along a street of regular facades can outscore the true one. Candidates that
-    # converged onto the same pose count once.
+    # The winner has the best evidence: its score relative to the level's best, summed over all
+    # refined cell sizes. At the finest cell alone a pose slid along a street of regular facades
+    # can outscore the true one. Candidates that converged onto the same pose count once.
     order = distinct_indices(cands, evidence, len(cands), schedule[-1])
     cands, scores, evidence = cands[order], scores[order], evidence[order]
     p = cands[0]

@@ -32,7 +32,7 @@ class Candidate:
     ty: float
     yaw_deg: float
     score: float  # at the finest cell size
-    evidence: float  # sum of its scores over the refined cell sizes (what the winner maximises)
+    evidence: float  # sum over refined cell sizes of score / best score there (winner's max)
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,8 @@
-"""Print the error of an ``ndt-register`` result against the sample data's ground truth.
+"""Print the errors of ndt-register / ndt-chain results against the sample data's ground truth.
 
-Usage: python tools/demo_check.py RESULT_DIR POSES_FILE TARGET_NAME SOURCE_NAME
+Usage:
+    python tools/demo_check.py pair RESULT_DIR POSES_FILE TARGET_NAME SOURCE_NAME
+    python tools/demo_check.py chain CHAIN_DIR POSES_FILE
 """
 
 from __future__ import annotations
@@ -13,17 +15,44 @@ import numpy as np
 from ndt_cli.transforms import read_matrix, read_pose_list, transform_errors, yaw_of
 
 
-def main(argv: list[str]) -> int:
-    result_dir, poses_file, target, source = argv
+def _line(label: str, T: np.ndarray, T_ref: np.ndarray) -> str:
+    rot, trans = transform_errors(T, T_ref)
+    return (
+        f"{label:<28} t = ({T[0, 3]:8.3f}, {T[1, 3]:8.3f}, {T[2, 3]:6.3f}) m  "
+        f"yaw = {np.degrees(yaw_of(T)):8.3f} deg   error: {rot:.4f} deg, {trans * 100:.2f} cm"
+    )
+
+
+def pair(result_dir: str, poses_file: str, target: str, source: str) -> int:
     T = read_matrix(Path(result_dir) / "T_target_source.txt")
     poses = read_pose_list(poses_file)
     T_ref = np.linalg.inv(poses[target]) @ poses[source]
-    rot, trans = transform_errors(T, T_ref)
-    print(f"ground truth: t = {np.round(T_ref[:3, 3], 4)} m, yaw = {np.degrees(yaw_of(T_ref)):.4f} deg")
-    print(f"estimate:     t = {np.round(T[:3, 3], 4)} m, yaw = {np.degrees(yaw_of(T)):.4f} deg")
-    print(f"error: rotation {rot:.4f} deg, translation {trans * 100:.2f} cm")
+    print(_line("ground truth", T_ref, T_ref))
+    print(_line(f"{source} -> {target}", T, T_ref))
+    return 0
+
+
+def chain(chain_dir: str, poses_file: str) -> int:
+    gt = read_pose_list(poses_file)
+    est = read_pose_list(Path(chain_dir) / "poses.txt")
+    names = sorted(gt)
+    print("link errors against ground truth:")
+    for a, b in zip(names, names[1:], strict=False):
+        T = read_matrix(Path(chain_dir) / f"T_{Path(a).stem}_{Path(b).stem}.txt")
+        print(_line(f"{b} -> {a}", T, np.linalg.inv(gt[a]) @ gt[b]))
+    world = np.linalg.inv(gt[names[0]])
+    last = names[-1]
+    if last in est:
+        rot, trans = transform_errors(est[last], world @ gt[last])
+        print(
+            f"end-of-chain drift ({last} in the frame of {names[0]}): "
+            f"{rot:.4f} deg, {trans * 100:.2f} cm"
+        )
+    else:
+        print(f"end-of-chain drift: {last} has no pose (a link failed)")
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    cmd, *args = sys.argv[1:]
+    sys.exit(pair(*args) if cmd == "pair" else chain(*args))
