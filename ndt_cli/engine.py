@@ -7,8 +7,8 @@ cell size (each level restarts from the previous solution and from +-half a cell
 best), and the one with the best score at the finest cell wins. Streets are nearly symmetric under
 a 180 degree turn, so the coarse winner is not trusted alone.
 
-Cost of the search: ``yaw_starts * (2 * range / step + 1)^2`` starts (972 with the defaults) times
-the search points (``search.points_per_slice`` per slice) per iteration.
+Cost of the search: ``yaw_starts * ((2 * range / step + 1)^2 + 1)`` starts (984 with the defaults)
+times the search points (``search.points_per_slice`` per slice) per iteration.
 """
 
 from __future__ import annotations
@@ -62,8 +62,12 @@ def source_points(scan: PreparedScan, cfg: Config, cap: int) -> SourcePoints:
     )
 
 
-def search_starts(c_target: np.ndarray, c_source: np.ndarray, cfg: Config) -> np.ndarray:
-    """(S,3) start poses: every start yaw times a translation grid around centroid alignment."""
+def search_starts(target: PreparedScan, source: PreparedScan, cfg: Config) -> np.ndarray:
+    """(S,3) start poses (reduced frames): every start yaw times a translation grid around the
+    pose that aligns the slice centroids, plus every start yaw at zero translation in the scans'
+    own frames (the paper's p0 = 0)."""
+    c_target, c_source = target.centroid(), source.centroid()
+    r_target, r_source = target.reduction[:2], source.reduction[:2]
     s = cfg.search
     yaws = 2 * np.pi * np.arange(s.yaw_starts) / s.yaw_starts
     n = int(np.floor(s.translation_range / s.translation_step + 1e-9))
@@ -73,8 +77,9 @@ def search_starts(c_target: np.ndarray, c_source: np.ndarray, cfg: Config) -> np
     starts = []
     for yaw in yaws:
         c, si = np.cos(yaw), np.sin(yaw)
-        t0 = c_target - np.array([[c, -si], [si, c]]) @ c_source
-        starts.append(np.column_stack([t0 + grid, np.full(len(grid), yaw)]))
+        R = np.array([[c, -si], [si, c]])
+        starts.append(np.column_stack([c_target - R @ c_source + grid, np.full(len(grid), yaw)]))
+        starts.append(np.array([[*(R @ r_source - r_target), yaw]]))
     return np.concatenate(starts)
 
 
@@ -135,7 +140,7 @@ def register_prepared(
         coarse = source_points(
             source, cfg, min(cfg.search.points_per_slice, cfg.source.points_per_slice)
         )
-        starts = search_starts(target.centroid(), source.centroid(), cfg)
+        starts = search_starts(target, source, cfg)
         res = optimize(_evaluator(maps(cells[0]), coarse), starts, cfg.optimizer, cells[0])
         cands = res.params[
             distinct_indices(res.params, res.score, cfg.search.keep_candidates, cells[0])

@@ -127,3 +127,18 @@ def test_two_different_streets_are_suspect_not_ok(street):
     result = ndt_cli.register(scans[0], other[0])
     assert result.status == "suspect" and not result.ok
     assert result.warnings and "score per point" in result.warnings[0]
+
+
+def test_search_includes_the_papers_zero_start_in_the_scan_frames(street):
+    from ndt_cli.engine import search_starts
+    from ndt_cli.prepare import load_and_prepare
+
+    scans, _ = street
+    cfg = Config()
+    t, s = load_and_prepare(scans[0], cfg), load_and_prepare(scans[1], cfg)
+    starts = search_starts(t, s, cfg)
+    assert len(starts) == cfg.search.yaw_starts * (9 * 9 + 1)
+    # identity in the scans' own frames, expressed in the reduced frames
+    T_local = translation(-t.reduction) @ np.eye(4) @ translation(s.reduction)
+    zero = np.array([T_local[0, 3], T_local[1, 3], 0.0])
+    assert np.min(np.abs(starts - zero).sum(axis=1)) < 1e-9

@@ -7,6 +7,7 @@ Usage:
 
 from __future__ import annotations
 
+import itertools
 import sys
 from pathlib import Path
 
@@ -37,7 +38,7 @@ def chain(chain_dir: str, poses_file: str) -> int:
     est = read_pose_list(Path(chain_dir) / "poses.txt")
     names = sorted(gt)
     print("link errors against ground truth:")
-    for a, b in zip(names, names[1:], strict=False):
+    for a, b in itertools.pairwise(names):
         T = read_matrix(Path(chain_dir) / f"T_{Path(a).stem}_{Path(b).stem}.txt")
         print(_line(f"{b} -> {a}", T, np.linalg.inv(gt[a]) @ gt[b]))
     world = np.linalg.inv(gt[names[0]])
