@@ -46,10 +46,13 @@ def natural_sort(paths: Sequence[str | Path]) -> list[Path]:
 
 
 def file_hash(path: Path) -> str:
-    """SHA-256 of a file's bytes ('missing' when it cannot be read)."""
-    h = hashlib.sha256()
+    """SHA-256 of a scan's file bytes (and its scan number in an E57); 'missing' if unreadable."""
+    from ndt_cli.e57 import split_spec
+
+    file, index = split_spec(path)
+    h = hashlib.sha256(b"" if index is None else f"#{index}".encode())
     try:
-        with open(path, "rb") as fh:
+        with open(file, "rb") as fh:
             while chunk := fh.read(_HASH_CHUNK):
                 h.update(chunk)
     except OSError:

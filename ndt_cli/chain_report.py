@@ -115,6 +115,17 @@ def write_chain_outputs(out: Path, result: ChainResult, cfg: Config, runtime_s: 
             atomic.write_text(
                 out / link_file_name(link, scans), format_matrix(link.T_target_source)
             )
+    from ndt_cli.e57 import header_poses
+
+    stored = header_poses(list(scans))
+    if stored:  # reported only: registration never uses them
+        lines = [
+            "# Poses stored in the E57 scan headers (ignored for registration): scan, then",
+            "# the 16 numbers of the 4x4 (scan frame to the E57 file frame), row-major",
+        ]
+        lines += [f"{scans[k].name} " + " ".join(f"{v:.17g}" for v in T.ravel())
+                  for k, T in stored.items()]  # fmt: skip
+        atomic.write_text(out / "e57_header_poses.txt", "\n".join(lines) + "\n")
     atomic.write_text(out / "config_used.yaml", dump(cfg))
     atomic.write_text(out / "summary.json", to_json(summary(result, runtime_s)))
 

@@ -133,12 +133,13 @@ def chain(
         import time
 
         from ndt_cli import config as config_mod
+        from ndt_cli import e57
         from ndt_cli.chain import natural_sort, run_chain
         from ndt_cli.chain_report import summary, write_chain_outputs, write_topview
         from ndt_cli.errors import ConfigError, InputError, OutputError
 
         cfg = config_mod.load(config)
-        paths = natural_sort(scans)
+        paths = e57.expand(natural_sort(scans))
         if len(paths) < 2:
             raise InputError("ndt-chain needs at least two scans")
         if not 0 <= anchor < len(paths):

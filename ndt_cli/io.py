@@ -205,7 +205,20 @@ class TextReader:
         return np.array(rows, dtype=np.float64).reshape(-1, 3)
 
 
-READERS: tuple[PointReader, ...] = (PlyReader(), LasReader(), PcdReader(), TextReader())
+class E57Reader:
+    """E57 scans (optional pye57); ``FILE.e57#K`` names scan K, see :mod:`ndt_cli.e57`."""
+
+    suffixes = (".e57",)
+
+    def read_xyz(self, path: Path) -> np.ndarray:
+        from ndt_cli import e57
+
+        return e57.read_xyz(path)
+
+
+READERS: tuple[PointReader, ...] = (
+    PlyReader(), LasReader(), PcdReader(), TextReader(), E57Reader()
+)  # fmt: skip
 SUPPORTED_SUFFIXES: tuple[str, ...] = tuple(s for r in READERS for s in r.suffixes)
 
 
@@ -245,14 +258,17 @@ def read(path: str | Path) -> PointCloud:
 
     Raises :class:`InputError` (one line, naming the file) for anything wrong with the file.
     """
+    from ndt_cli.e57 import split_spec
+
     p = Path(path)
-    if not p.exists():
+    f = split_spec(p)[0]  # 'scans.e57#3' names scan 3 of scans.e57
+    if not f.exists():
         raise InputError("file not found", p)
-    if p.is_dir():
+    if f.is_dir():
         raise InputError("is a directory, not a point file", p)
-    reader = _reader_for(p)
+    reader = _reader_for(f)
     try:
-        if p.stat().st_size == 0:
+        if f.stat().st_size == 0:
             raise InputError("file is empty", p)
         raw = np.asarray(reader.read_xyz(p), dtype=np.float64).reshape(-1, 3)
     except NdtError:
@@ -268,7 +284,8 @@ def read(path: str | Path) -> PointCloud:
     zero = (raw == 0.0).all(axis=1)
     keep = finite & ~zero
     n_nonfinite, n_zero = int(n_read - finite.sum()), int(zero.sum())
-    logger.info(
+    logger.log(
+        logging.INFO if n_nonfinite or n_zero else logging.DEBUG,
         "%s: read %d points, dropped %d non-finite and %d (0,0,0) points",
         p,
         n_read,

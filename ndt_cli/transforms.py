@@ -5,6 +5,7 @@ Naming follows ``T_a_b``: the matrix maps points from frame b into frame a, ``p_
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -85,7 +86,10 @@ def read_matrix(path: str | Path) -> np.ndarray:
 
 
 def read_pose_list(path: str | Path) -> dict[str, np.ndarray]:
-    """Read ``name m00 m01 ... m33`` lines (a 4x4 per scan, row-major; '#' comments) into a dict."""
+    """Read ``name m00 m01 ... m33`` lines (a 4x4 per scan, row-major) into a dict.
+
+    A ``#`` at the start of a line or after a space starts a comment.
+    """
     p = Path(path)
     try:
         lines = p.read_text(encoding="utf-8").splitlines()
@@ -93,7 +97,7 @@ def read_pose_list(path: str | Path) -> dict[str, np.ndarray]:
         raise InputError(f"cannot read poses ({exc.strerror or exc})", p) from None
     poses = {}
     for n, line in enumerate(lines, 1):
-        fields = line.split("#")[0].split()
+        fields = re.sub(r"(^|\s)#.*$", "", line).split()  # 'scans.e57#2' is a name, not a comment
         if not fields:
             continue
         try:
@@ -104,3 +108,11 @@ def read_pose_list(path: str | Path) -> dict[str, np.ndarray]:
             raise InputError(f"line {n}: expected a name and 16 numbers", p)
         poses[fields[0]] = np.array(values).reshape(4, 4)
     return poses
+
+
+def rotation_to_quaternion(R: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) of a 3x3 rotation matrix."""
+    from scipy.spatial.transform import Rotation
+
+    x, y, z, w = Rotation.from_matrix(R).as_quat()
+    return np.array([w, x, y, z])

@@ -165,3 +165,24 @@ def test_mulls_street_sequence_matches_icp_reference(tmp_path):
         T = read_matrix(tmp_path / "m" / f"T_{files[k - 1].stem}_{files[k].stem}.txt")
         rot, trans = planar_errors(T, refs[k - 1])
         assert rot < 0.5 and trans < 0.10, (k, rot, trans)
+
+
+def test_chain_registers_the_scans_inside_one_e57_file(tmp_path):
+    pytest.importorskip("pye57", reason="the e57 extra is not installed")
+    from ndt_cli import e57
+
+    _, scans, poses = simulate.make_sequence(
+        seed=21, n_scans=3, spacing=(13.0, 17.0), scan_kwargs={"n_azimuth": 1000}
+    )
+    header = [np.linalg.inv(poses[0]) @ T for T in poses]  # what a scanner might have stored
+    campaign = tmp_path / "campaign.e57"
+    e57.write(campaign, scans, header)
+    res = runner.invoke(chain_app, [str(campaign), "--out", str(tmp_path / "o"), "--quiet"])
+    assert res.exit_code == 0, res.output
+    est = read_pose_list(tmp_path / "o" / "poses.txt")
+    assert sorted(est) == ["campaign.e57#0", "campaign.e57#1", "campaign.e57#2"]
+    for k in range(3):
+        rot, trans = planar_errors(est[f"campaign.e57#{k}"], world_gt(poses)[k])
+        assert rot < 0.3 and trans < 0.2
+    stored = read_pose_list(tmp_path / "o" / "e57_header_poses.txt")
+    np.testing.assert_allclose(stored["campaign.e57#2"], header[2], atol=1e-9)

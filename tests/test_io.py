@@ -432,3 +432,31 @@ def test_real_velodyne_pcd_drops_zero_points() -> None:
     assert cloud.points.shape == (69_088 - 5_032, 3)
     assert not (cloud.points == 0).all(axis=1).any()
     assert 70 < np.linalg.norm(cloud.points, axis=1).max() < 80  # extents up to about 75 m
+
+
+def test_e57_scans_are_read_by_number_and_header_poses_reported(tmp_path: Path) -> None:
+    pytest.importorskip("pye57", reason="the e57 extra is not installed")
+    from ndt_cli import e57
+
+    rng = np.random.default_rng(0)
+    scans = [rng.uniform(-20, 20, (500, 3)), rng.uniform(-20, 20, (700, 3))]
+    pose = np.eye(4)
+    pose[:3, 3] = [10.0, -5.0, 1.5]
+    path = tmp_path / "campaign.e57"
+    e57.write(path, scans, [pose, None])
+    assert e57.expand([path]) == [Path(f"{path}#0"), Path(f"{path}#1")]
+    for k in range(2):
+        cloud = ndt_io.read(f"{path}#{k}")
+        np.testing.assert_allclose(cloud.points, scans[k], atol=1e-5)  # own frame: pose not applied
+    np.testing.assert_allclose(e57.header_pose(f"{path}#0"), pose)
+    with pytest.raises(InputError, match="holds 2 scans"):
+        ndt_io.read(path)
+    with pytest.raises(InputError, match="no scan #5"):
+        ndt_io.read(f"{path}#5")
+    single = tmp_path / "one.e57"
+    e57.write(single, scans[:1], [None])
+    assert len(ndt_io.read(single).points) == 500
+    bad = tmp_path / "bad.e57"
+    bad.write_bytes(b"not an e57 file at all" * 10)
+    with pytest.raises(InputError, match=r"bad\.e57"):
+        ndt_io.read(bad)

@@ -80,3 +80,119 @@ def test_corridor_facades_have_no_gaps():
         xs = np.sort(wall[np.abs(wall[:, 0]) < 40, 0])
         assert len(xs) > 50 and np.diff(xs).max() < 2.0  # continuous facade along the street
     assert len(scene.cylinders) == 0
+
+
+def test_scene_is_deterministic_in_its_seed():
+    assert simulate.make_street(seed=3) == simulate.make_street(seed=3)
+    assert simulate.make_street(seed=3) != simulate.make_street(seed=4)
+    assert simulate.make_street(seed=3, corridor=True) == simulate.make_street(3, corridor=True)
+    a, b = simulate.make_street(seed=3), simulate.make_street(seed=4)
+    assert not np.array_equal(a.boxes_min[:10], b.boxes_min[:10])
+
+
+def test_noise_seed_changes_the_points_and_only_the_noise(street):
+    T = simulate.scanner_pose(2.0, -1.0, 15.0)
+    a = simulate.simulate_scan(street, T, **SMALL, seed=1)
+    b = simulate.simulate_scan(street, T, **SMALL, seed=1)
+    c = simulate.simulate_scan(street, T, **SMALL, seed=2)
+    assert np.array_equal(a, b)
+    assert a.shape == c.shape and not np.array_equal(a, c)
+    # same rays: the directions agree, only the ranges differ (by the noise)
+    ua = a / np.linalg.norm(a, axis=1, keepdims=True)
+    uc = c / np.linalg.norm(c, axis=1, keepdims=True)
+    assert np.abs(ua - uc).max() < 1e-9
+
+
+def test_scan_sees_facades_between_4_and_12_m(street):
+    T = simulate.scanner_pose(-5.0, 0.5, 70.0)
+    world = apply(T, simulate.simulate_scan(street, T, **SMALL))
+    high = world[(world[:, 2] > 4.0) & (world[:, 2] < 12.0)]
+    assert len(high) > 500
+    # they are facades: at or behind the facade lines y = +-9 m (protrusions up to 0.6 m)
+    assert np.mean(np.abs(high[:, 1]) > 8.3) > 0.95
+    assert (high[:, 1] > 0).any() and (high[:, 1] < 0).any()
+
+
+def test_occluder_casts_a_shadow_on_the_wall_behind_it():
+    wall = ([20.0, -30.0, 0.0], [21.0, 30.0, 15.0])
+    post = ([5.0, -1.0, 0.0], [6.0, 1.0, 3.0])
+    T = simulate.scanner_pose(0.0, 0.0, 0.0)
+    kw = {"n_azimuth": 720, "n_elevation": 120, "range_noise": 0.0}
+    open_scene = simulate.Scene(np.array([wall[0]]), np.array([wall[1]]), np.zeros((0, 5)))
+    blocked = simulate.Scene(np.array([wall[0], post[0]]), np.array([wall[1], post[1]]),
+                             np.zeros((0, 5)))  # fmt: skip
+
+    def shadow_region(points: np.ndarray) -> np.ndarray:
+        on_wall = np.abs(points[:, 0] - 20.0) < 1e-6
+        return on_wall & (np.abs(points[:, 1]) < 3.0) & (points[:, 2] > 2.0) & (points[:, 2] < 6.0)
+
+    assert shadow_region(apply(T, simulate.simulate_scan(open_scene, T, **kw))).sum() > 50
+    seen = apply(T, simulate.simulate_scan(blocked, T, **kw))
+    assert not shadow_region(seen).any()
+    assert (np.abs(seen[:, 0] - 5.0) < 1e-6).sum() > 50  # the post's front face is seen instead
+
+
+def test_tilted_scan_points_lie_on_the_scene_surfaces(street):
+    eps = 1e-6
+    tilted = simulate.scanner_pose(8.0, 1.0, -30.0, roll_deg=3.0, pitch_deg=-2.0)
+    pts = simulate.simulate_scan(street, tilted, **SMALL, range_noise=0.0)
+
+    def on_surface(world: np.ndarray) -> np.ndarray:
+        near = (np.abs(world[:, 2]) < eps) | street.contains(world, margin=-eps)
+        return near & ~street.contains(world, margin=eps)
+
+    assert on_surface(apply(tilted, pts)).all()
+    level = simulate.scanner_pose(8.0, 1.0, -30.0)  # ignoring the tilt misplaces the points
+    assert on_surface(apply(level, pts)).mean() < 0.5
+
+
+def test_corridor_is_gapless_and_uniform_but_the_street_has_gaps():
+    def facade_coverage_holes(scene: simulate.Scene, side: int, x_lo: float, x_hi: float) -> float:
+        lo, hi = scene.boxes_min, scene.boxes_max
+        front = (side * lo[:, 1] > 8.0) if side > 0 else (side * hi[:, 1] > 8.0)
+        tall = hi[:, 2] > 5.0
+        spans = np.c_[lo[front & tall, 0], hi[front & tall, 0]]
+        xs = np.arange(x_lo, x_hi, 0.25)
+        covered = ((xs[:, None] >= spans[:, 0]) & (xs[:, None] <= spans[:, 1])).any(axis=1)
+        return float((~covered).mean())
+
+    corridor = simulate.make_street(seed=2, corridor=True)
+    street = simulate.make_street(seed=2)
+    for side in (1, -1):
+        assert facade_coverage_holes(corridor, side, -250.0, 250.0) == 0.0
+    assert max(facade_coverage_holes(street, s, -130.0, 130.0) for s in (1, -1)) > 0.02
+    # uniform along x: every corridor box spans the whole street (and beyond)
+    assert (corridor.boxes_min[:, 0] <= -200.0).all() and (corridor.boxes_max[:, 0] >= 200.0).all()
+    assert len(street.cylinders) > 0 and len(corridor.cylinders) == 0
+
+
+def test_sequence_standpoints_follow_the_street():
+    scene, scans, poses = simulate.make_sequence(
+        seed=11, n_scans=4, tilt_deg=2.0, scan_kwargs={"n_azimuth": 90, "n_elevation": 20}
+    )
+    assert len(scans) == len(poses) == 4
+    t = np.array([T[:3, 3] for T in poses])
+    assert np.all((np.diff(t[:, 0]) >= 13.0) & (np.diff(t[:, 0]) <= 30.0))
+    assert np.all(np.abs(t[:, 1]) <= 3.0) and np.allclose(t[:, 2], 1.6)
+    for T in poses:
+        R = T[:3, :3]
+        assert np.allclose(R.T @ R, np.eye(3)) and np.linalg.det(R) == pytest.approx(1.0)
+        assert np.allclose(T[3], [0, 0, 0, 1])
+        assert 0.0 < np.degrees(np.arccos(np.clip(R[2, 2], -1, 1))) < 2.0 * np.sqrt(2) + 1e-9
+    yaws = [np.degrees(np.arctan2(T[1, 0], T[0, 0])) for T in poses]
+    assert len(set(np.round(yaws, 6))) == 4
+    assert len(scene.boxes_min) > 100
+
+
+def test_default_scan_density_and_range(street):
+    T = simulate.scanner_pose(0.0, 0.0, 0.0)
+    pts = simulate.simulate_scan(street, T)
+    assert 100_000 <= len(pts) <= 300_000
+    assert np.linalg.norm(pts, axis=1).max() < 120.0 + 0.1
+
+
+def test_scanner_inside_an_object_is_refused(street):
+    centre = 0.5 * (street.boxes_min[0] + street.boxes_max[0])
+    with pytest.raises(ValueError, match="inside"):
+        simulate.simulate_scan(street, simulate.scanner_pose(*centre[:2], 0.0, height=centre[2]),
+                               **SMALL)  # fmt: skip
