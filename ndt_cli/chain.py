@@ -77,6 +77,7 @@ class Link:
     converged: bool = False
     runtime_s: float = 0.0
     key: str = ""
+    levels: str = ""  # per cell size: iterations, score and time of the winning start
 
     @property
     def ok(self) -> bool:
@@ -165,6 +166,10 @@ def _register_link(
         converged=r.converged,
         runtime_s=r.runtime_s,
         key=key,
+        levels="  ".join(
+            f"{lv.cell_size:g} m: {lv.iterations} it, score {lv.score:.0f}, {lv.time_s:.2f} s"
+            for lv in r.levels
+        ),
     )
 
 

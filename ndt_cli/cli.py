@@ -9,7 +9,7 @@ from __future__ import annotations
 import logging
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -175,6 +175,12 @@ def chain(
         raise typer.Exit(EXIT_REGISTRATION)
 
 
+def _log_link(link: Any) -> None:
+    """At --verbose, one line per finished link with its per-level progress."""
+    log = logging.getLogger("ndt_cli.chain")
+    log.debug("link %s (%s): %s", link.index, link.status, link.levels or link.reason)
+
+
 class _Progress:
     """A rich progress bar over links, shown only on a terminal; yields the advance callback."""
 
@@ -185,13 +191,13 @@ class _Progress:
 
     def __enter__(self):
         if not self.enabled:
-            return lambda link: None
+            return _log_link
         from rich.progress import Progress
 
         self.bar = Progress()
         self.bar.start()
         task = self.bar.add_task("links", total=self.total)
-        return lambda link: self.bar.advance(task)
+        return lambda link: (self.bar.advance(task), _log_link(link))
 
     def __exit__(self, *exc: object) -> None:
         if self.bar is not None:
