@@ -17,6 +17,12 @@ from ndt_cli.errors import EXIT_INPUT, EXIT_REGISTRATION, NdtError
 
 register_app = typer.Typer(add_completion=False, pretty_exceptions_enable=False)
 
+# options shared by the commands
+ConfigOpt = Annotated[Path | None, typer.Option("--config", "-c", help="YAML config file.")]
+QuietOpt = Annotated[bool, typer.Option("--quiet", "-q", help="Print errors only.")]
+VerboseOpt = Annotated[bool, typer.Option("--verbose", "-v", help="More log messages.")]
+DebugOpt = Annotated[bool, typer.Option(help="Show tracebacks of errors.")]
+
 _REGISTER_HELP = "\n\n".join(
     [
         "Register SOURCE onto TARGET with multi-slice 2D NDT; no initial guess is needed.",
@@ -48,7 +54,7 @@ def _fail(exc: NdtError, prog: str) -> typer.Exit:
 def register(
     target: Annotated[Path, typer.Argument(help="Fixed scan (its frame is the result's frame).")],
     source: Annotated[Path, typer.Argument(help="Moving scan.")],
-    config: Annotated[Path | None, typer.Option("--config", "-c", help="YAML config file.")] = None,
+    config: ConfigOpt = None,
     init: Annotated[
         Path | None, typer.Option(help="Initial guess of T_target_source: a 4x4 text file.")
     ] = None,
@@ -56,9 +62,9 @@ def register(
     json_out: Annotated[
         bool, typer.Option("--json", help="Print the result as JSON on stdout.")
     ] = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print errors only.")] = False,
-    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="More log messages.")] = False,
-    debug: Annotated[bool, typer.Option(help="Show tracebacks of errors.")] = False,
+    quiet: QuietOpt = False,
+    verbose: VerboseOpt = False,
+    debug: DebugOpt = False,
 ) -> None:
     _setup_logging(quiet or json_out, verbose)
     try:
@@ -114,7 +120,7 @@ _CHAIN_HELP = "\n\n".join(
 @chain_app.command(help=_CHAIN_HELP, no_args_is_help=True)
 def chain(
     scans: Annotated[list[Path], typer.Argument(help="Scan files (at least two).")],
-    config: Annotated[Path | None, typer.Option("--config", "-c", help="YAML config file.")] = None,
+    config: ConfigOpt = None,
     out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("ndt_chain"),
     jobs: Annotated[
         int | None, typer.Option("--jobs", "-j", help="Parallel processes [default: cores].")
@@ -124,9 +130,9 @@ def chain(
     ] = False,
     anchor: Annotated[int, typer.Option(help="Index of the scan that defines the world.")] = 0,
     json_out: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print errors only.")] = False,
-    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="More log messages.")] = False,
-    debug: Annotated[bool, typer.Option(help="Show tracebacks of errors.")] = False,
+    quiet: QuietOpt = False,
+    verbose: VerboseOpt = False,
+    debug: DebugOpt = False,
 ) -> None:
     _setup_logging(quiet or json_out, verbose)
     try:

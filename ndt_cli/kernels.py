@@ -63,6 +63,20 @@ def sym3(v: np.ndarray) -> np.ndarray:
     return v[..., _SYM]
 
 
+@numba.njit(cache=True, inline="always")
+def _find_cell(xp, yp, g, origin, shape, offset, cell_index, inv_cell):  # pragma: no cover
+    """Row of the cell of grid ``g`` that holds (xp, yp), or -1 (outside or too few points)."""
+    fx = (xp - origin[g, 0]) * inv_cell
+    fy = (yp - origin[g, 1]) * inv_cell
+    if fx < 0.0 or fy < 0.0:
+        return -1
+    ix = int(fx)
+    iy = int(fy)
+    if ix >= shape[g, 0] or iy >= shape[g, 1]:
+        return -1
+    return cell_index[offset[g] + ix * shape[g, 1] + iy]
+
+
 @numba.njit(parallel=True, cache=True, fastmath=False)
 def _accumulate(
     params,
@@ -121,14 +135,7 @@ def _accumulate(
             jy = co * x - si * y
             k = sid[i]
             for g in range(slice_grids[k], slice_grids[k + 1]):
-                fx = (xp - origin[g, 0]) * inv_cell
-                fy = (yp - origin[g, 1]) * inv_cell
-                ci = -1
-                if fx >= 0.0 and fy >= 0.0:
-                    ix = int(fx)
-                    iy = int(fy)
-                    if ix < shape[g, 0] and iy < shape[g, 1]:
-                        ci = cell_index[offset[g] + ix * shape[g, 1] + iy]
+                ci = _find_cell(xp, yp, g, origin, shape, offset, cell_index, inv_cell)
                 if ci < 0:
                     err += 0.5
                     continue
@@ -224,15 +231,7 @@ def _point_scores(
         d2 = 0.0
         k = sid[i]
         for g in range(slice_grids[k], slice_grids[k + 1]):
-            fx = (xp - origin[g, 0]) * inv_cell
-            fy = (yp - origin[g, 1]) * inv_cell
-            if fx < 0.0 or fy < 0.0:
-                continue
-            ix = int(fx)
-            iy = int(fy)
-            if ix >= shape[g, 0] or iy >= shape[g, 1]:
-                continue
-            ci = cell_index[offset[g] + ix * shape[g, 1] + iy]
+            ci = _find_cell(xp, yp, g, origin, shape, offset, cell_index, inv_cell)
             if ci < 0:
                 continue
             dx = xp - means[ci, 0]
