@@ -86,7 +86,7 @@ class QualityConfig:
 
     min_score_per_point: float = 0.12  # final NDT score per source slice point
     min_overlap: float = 0.3  # share of source slice points inside a target cell
-    max_ambiguity: float = 0.97  # second-best candidate's evidence over the best's
+    max_ambiguity: float = 0.95  # second-best candidate's evidence over the best's
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,7 @@ from ndt_cli.config import OptimizerConfig
 from ndt_cli.kernels import ERR, GRAD, HESS, JTJ, JTR, SCORE, sym3
 
 Evaluator = Callable[[np.ndarray], np.ndarray]
-_REL_IMPROVEMENT = 1e-9  # a score must rise by this fraction to count as improved
+_REL_IMPROVEMENT = 1e-6  # a score must rise by this fraction to count as improved (sub-mm)
 
 
 @dataclass(frozen=True)

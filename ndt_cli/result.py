@@ -32,7 +32,7 @@ class Candidate:
     ty: float
     yaw_deg: float
     score: float  # at the finest cell size
-    evidence: float  # sum over refined cell sizes of score / best score there (winner's max)
+    evidence: float  # fit-weighted score summed over the finest levels (the winner's is highest)
 
 
 @dataclass(frozen=True)
