@@ -85,7 +85,7 @@ class QualityConfig:
     """Thresholds below which a converged registration is reported as suspect."""
 
     min_score_per_point: float = 0.12  # final NDT score per source slice point
-    min_overlap: float = 0.3  # share of source slice points inside a target cell
+    min_overlap: float = 0.2  # share of source slice points inside a target cell
     max_ambiguity: float = 0.95  # second-best candidate's evidence over the best's
 
 
