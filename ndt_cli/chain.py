@@ -14,8 +14,10 @@ import logging
 import multiprocessing
 import os
 import re
-from collections.abc import Callable, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+import signal
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -24,7 +26,7 @@ import numpy as np
 
 from ndt_cli import atomic
 from ndt_cli.config import Config, dump
-from ndt_cli.errors import NdtError
+from ndt_cli.errors import NdtError, UserInterruptError
 from ndt_cli.report import to_json
 
 log = logging.getLogger(__name__)
@@ -124,9 +126,15 @@ def preview(scan: Any, max_points: int = 4000) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- workers
 
+_FAULT_EXIT = False  # set in workers by NDT_CLI_FAULT_EXIT_ON=register (tests only)
+
 
 def _init_worker(threads: int) -> None:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is handled by the parent
+    if os.environ.get("NDT_CLI_FAULT_EXIT_ON") == "register":  # fault injection for tests
+        global _FAULT_EXIT
+        _FAULT_EXIT = True
     import numba
 
     numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
@@ -147,6 +155,9 @@ def _register_link(
 ) -> Link:
     """A worker task: register prepared scan ``source`` (j) onto ``target`` (i)."""
     from ndt_cli.engine import register_prepared
+
+    if _FAULT_EXIT and source.path is not None and "crash" in source.path.name:
+        os._exit(3)  # simulate a worker killed mid-task
 
     try:
         r = register_prepared(target, source, cfg)
@@ -171,6 +182,70 @@ def _register_link(
             for lv in r.levels
         ),
     )
+
+
+class _Pool:
+    """Worker processes for chain tasks that survive a worker dying.
+
+    Processes are spawned, not forked: a forked child of a process whose Numba threads already
+    ran can deadlock. When a worker dies (killed, out of memory, a crash in a library), every
+    task in flight fails with BrokenProcessPool; those tasks are then rerun one at a time in a
+    fresh single-worker pool, so only the task that kills its worker fails.
+    """
+
+    def __init__(self, jobs: int, threads: int) -> None:
+        self.jobs = jobs
+        self.threads = threads
+        self._pool: ProcessPoolExecutor | None = None
+
+    def _new(self, workers: int) -> ProcessPoolExecutor:
+        self.close()
+        self._pool = ProcessPoolExecutor(
+            max_workers=workers,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=_init_worker,
+            initargs=(self.threads,),
+        )
+        return self._pool
+
+    def run(self, tasks: dict[int, tuple]) -> Iterator[tuple[int, Any]]:
+        """Yield (key, result) as tasks finish; a task that fails yields its one-line reason."""
+        queue = list(tasks)
+        workers = self.jobs
+        while queue:
+            pool = self._pool if self._pool and workers == self.jobs else self._new(workers)
+            futures = {pool.submit(*tasks[k]): k for k in queue}
+            broken: list[int] = []
+            for fut in as_completed(futures):
+                key = futures[fut]
+                try:
+                    yield key, fut.result()
+                except BrokenProcessPool:
+                    broken.append(key)
+                except Exception as exc:  # a bug in a task: report it for that task only
+                    yield key, f"worker error: {' '.join(str(exc).split())[:200]}"
+            queue = [k for k in queue if k in broken]
+            if queue and workers == 1:  # in isolation the first task in line killed its worker
+                culprit = queue.pop(0)
+                yield culprit, "the worker process died (killed, out of memory or crashed)"
+            if queue:
+                workers = 1
+                self._new(1)
+
+    def terminate(self) -> None:
+        """Stop the workers now (on Ctrl-C): running tasks are abandoned, nothing is written."""
+        pool = self._pool
+        if pool is None:
+            return
+        for proc in list(getattr(pool, "_processes", {}).values()):
+            proc.terminate()
+        pool.shutdown(wait=False, cancel_futures=True)
+        self._pool = None
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
 
 
 # ----------------------------------------------------------------------------- driver
@@ -256,11 +331,10 @@ def run_chain(
         if on_progress:
             on_progress(link)
 
-    # spawn, not fork: a forked child of a process whose Numba threads already ran can deadlock
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(
-        max_workers=jobs, mp_context=context, initializer=_init_worker, initargs=(threads,)
-    ) as pool:
+    for stale in (out / LINK_FOLDER).glob(".*.tmp*"):  # left by a run that was killed
+        stale.unlink(missing_ok=True)
+    pool = _Pool(jobs, threads)
+    try:
         pairs, keys = plan()
         if resume:
             for index, key in enumerate(keys):
@@ -269,10 +343,8 @@ def run_chain(
                     finished[index] = link
         # read and slice each scan that an unfinished link needs, once, in parallel
         needed = sorted({s for k, pair in enumerate(pairs) if k not in finished for s in pair})
-        tasks = [pool.submit(_prepare_scan, paths[i], cfg) for i in needed]
         prepared: dict[int, Any] = {}
-        for i, fut in zip(needed, tasks, strict=True):
-            value = fut.result()
+        for i, value in pool.run({i: (_prepare_scan, paths[i], cfg) for i in needed}):
             if isinstance(value, str):
                 unreadable[i] = value
             else:
@@ -283,40 +355,30 @@ def run_chain(
         reused = set(finished)
         for link in list(finished.values()):
             report(link)
-        futures: dict[Future, int] = {}
+        todo: dict[int, tuple] = {}
         for index, (i, j) in enumerate(pairs):
             if index in finished:
                 continue
             if i in unreadable or j in unreadable:
-                report(
-                    Link(
-                        index,
-                        i,
-                        j,
-                        "failed",
-                        reason=unreadable.get(j) or unreadable[i],
-                        key=keys[index],
-                    )
-                )
+                reason = unreadable.get(j) or unreadable[i]
+                report(Link(index, i, j, "failed", reason=reason, key=keys[index]))
                 continue
-            task = pool.submit(
-                _register_link, index, i, j, prepared[i], prepared[j], cfg, keys[index]
-            )
-            futures[task] = index
-        while futures:
-            done, _ = wait(futures, return_when=FIRST_COMPLETED)
-            for fut in done:
-                index = futures.pop(fut)
-                try:
-                    link = fut.result()
-                except Exception as exc:  # a crashed worker fails its link, not the chain
-                    i, j = pairs[index]
-                    report(
-                        Link(index, i, j, "failed", reason=f"worker error: {exc}", key=keys[index])
-                    )
-                    continue
-                atomic.write_text(out / LINK_FOLDER / f"{index:04d}.json", to_json(link.to_dict()))
-                report(link)
+            todo[index] = (_register_link, index, i, j, prepared[i], prepared[j], cfg, keys[index])
+        for index, link in pool.run(todo):
+            if isinstance(link, str):  # the worker died or raised: this link fails, not the chain
+                i, j = pairs[index]
+                report(Link(index, i, j, "failed", reason=link, key=keys[index]))
+                continue
+            atomic.write_text(out / LINK_FOLDER / f"{index:04d}.json", to_json(link.to_dict()))
+            report(link)
+    except KeyboardInterrupt:
+        pool.terminate()
+        raise UserInterruptError(
+            f"interrupted: {len(finished)} finished link(s) kept in {out / LINK_FOLDER}; "
+            "run again with --resume to continue"
+        ) from None
+    finally:
+        pool.close()
 
     links = tuple(finished[k] for k in sorted(finished))
     for reason in dict(sorted(unreadable.items())).values():

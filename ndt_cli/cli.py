@@ -13,7 +13,7 @@ from typing import Annotated, Any
 
 import typer
 
-from ndt_cli.errors import EXIT_INPUT, EXIT_REGISTRATION, NdtError
+from ndt_cli.errors import EXIT_INPUT, EXIT_REGISTRATION, NdtError, UserInterruptError
 
 register_app = typer.Typer(add_completion=False, pretty_exceptions_enable=False)
 
@@ -43,6 +43,9 @@ def _setup_logging(quiet: bool, verbose: bool) -> None:
     logging.basicConfig(
         level=level, format="%(levelname)s: %(message)s", stream=sys.stderr, force=True
     )
+    # libraries log their own failures, which reach the user as one InputError line instead
+    for name in ("laspy", "numba", "matplotlib", "pye57"):
+        logging.getLogger(name).setLevel(logging.DEBUG if verbose else logging.CRITICAL)
 
 
 def _fail(exc: NdtError, prog: str) -> typer.Exit:
@@ -77,6 +80,8 @@ def register(
         T_init = read_matrix(init) if init is not None else None
         result = run(target, source, cfg, init=T_init)
         report.write_register_outputs(out, result, cfg)
+    except KeyboardInterrupt:
+        raise _fail(UserInterruptError("interrupted"), "ndt-register") from None
     except NdtError as exc:
         if debug:
             raise
@@ -162,6 +167,9 @@ def chain(
         runtime = time.perf_counter() - t0
         write_chain_outputs(out, result, cfg, runtime)
         write_topview(out, result, cfg)
+    except KeyboardInterrupt:
+        msg = "interrupted: finished links are kept; run again with --resume to continue"
+        raise _fail(UserInterruptError(msg), "ndt-chain") from None
     except NdtError as exc:
         if debug:
             raise

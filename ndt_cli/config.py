@@ -87,6 +87,7 @@ class QualityConfig:
     min_score_per_point: float = 0.12  # final NDT score per source slice point
     min_overlap: float = 0.2  # share of source slice points inside a target cell
     max_ambiguity: float = 0.95  # second-best candidate's evidence over the best's
+    min_constraint_ratio: float = 0.01  # weakest / strongest translation curvature of the score
 
 
 @dataclass(frozen=True)
@@ -258,8 +259,13 @@ def _validate(c: Config) -> None:
     positive("search.points_per_slice", c.search.points_per_slice)
     positive("search.keep_candidates", c.search.keep_candidates)
     q = c.quality
-    if q.min_score_per_point < 0 or not 0 <= q.min_overlap <= 1 or not 0 < q.max_ambiguity <= 1:
+    if (
+        q.min_score_per_point < 0
+        or not 0 <= q.min_overlap <= 1
+        or not 0 < q.max_ambiguity <= 1
+        or not 0 <= q.min_constraint_ratio < 1
+    ):
         raise ConfigError(
             "'quality' thresholds: min_score_per_point >= 0, min_overlap in [0, 1], "
-            "max_ambiguity in (0, 1]"
+            "max_ambiguity in (0, 1], min_constraint_ratio in [0, 1)"
         )

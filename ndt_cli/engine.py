@@ -126,6 +126,15 @@ def _fit_weighted(acc: np.ndarray) -> np.ndarray:
     return w / max(w.max(), 1e-300)
 
 
+def weakest_direction(H: np.ndarray) -> tuple[np.ndarray, float]:
+    """Unit direction (x, y; target frame) along which translating changes the score least,
+    and the ratio of the smallest to the largest curvature of the score in translation."""
+    w, V = np.linalg.eigh(H[:2, :2])
+    if w[1] <= 0:
+        return V[:, 0], 0.0
+    return V[:, 0], float(max(w[0], 0.0) / w[1])
+
+
 def _pairs(ndt: NDTMap, src: SourcePoints) -> int:
     """(point, grid) pairs: the points times the grids of their slice."""
     return int(np.diff(ndt.slice_grids)[src.slice_id].sum())
@@ -218,6 +227,7 @@ def register_prepared(
     per_point = score / max(len(fine), 1)
     ambiguity = evidence[1] / evidence[0] if len(evidence) > 1 and evidence[0] > 0 else 0.0
     q = cfg.quality
+    weak, constraint = weakest_direction(sym3(final[HESS]))
     warnings = [
         text
         for bad, text in [
@@ -226,6 +236,11 @@ def register_prepared(
                 f"score per point {per_point:.3f} < {q.min_score_per_point}",
             ),
             (overlap < q.min_overlap, f"overlap {overlap:.2f} < {q.min_overlap}"),
+            (
+                constraint < q.min_constraint_ratio,
+                f"degenerate: translation along ({weak[0]:.2f}, {weak[1]:.2f}) is weakly "
+                f"constrained (ratio {constraint:.4f} < {q.min_constraint_ratio})",
+            ),
             (
                 ambiguity > q.max_ambiguity,
                 f"ambiguous: second solution has {ambiguity:.2f} of the best's evidence",

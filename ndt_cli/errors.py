@@ -11,6 +11,7 @@ from pathlib import Path
 EXIT_OK = 0
 EXIT_REGISTRATION = 1
 EXIT_INPUT = 2
+EXIT_INTERRUPTED = 130
 
 
 class NdtError(Exception):
@@ -46,3 +47,9 @@ class RegistrationError(NdtError):
     """Registration ran but failed (e.g. no overlap: the score is zero)."""
 
     exit_code = EXIT_REGISTRATION
+
+
+class UserInterruptError(NdtError):
+    """Stopped by Ctrl-C / SIGINT; what finished is kept (``ndt-chain --resume`` continues)."""
+
+    exit_code = EXIT_INTERRUPTED

@@ -220,6 +220,7 @@ READERS: tuple[PointReader, ...] = (
     PlyReader(), LasReader(), PcdReader(), TextReader(), E57Reader()
 )  # fmt: skip
 SUPPORTED_SUFFIXES: tuple[str, ...] = tuple(s for r in READERS for s in r.suffixes)
+WRITE_SUFFIXES: tuple[str, ...] = (".ply", ".las", ".laz", ".pcd", ".xyz", ".txt", ".csv")
 
 
 def _require_xyz(names: tuple[str, ...] | list[str], path: Path) -> None:
@@ -355,8 +356,11 @@ def write(path: str | Path, points: np.ndarray) -> None:
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise ValueError(f"points must be an (N,3) array, got shape {pts.shape}")
     suffix = target.suffix.lower()
-    if suffix not in SUPPORTED_SUFFIXES:
-        raise OutputError(_unknown_suffix(target), target)
+    if suffix not in WRITE_SUFFIXES:
+        raise OutputError(
+            f"cannot write {suffix or '(no extension)'!r}; writable: {' '.join(WRITE_SUFFIXES)}",
+            target,
+        )
     offsets = _las_offsets(pts, target) if suffix in (".las", ".laz") else None
     with atomic_path(target) as tmp:
         if suffix == ".ply":

@@ -4,11 +4,7 @@ unreadable scans, and the real MULLS street sequence."""
 from __future__ import annotations
 
 import json
-import os
-import signal
-import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -109,32 +105,6 @@ def test_unreadable_scan_in_the_middle_fails_its_link_and_the_chain_goes_on(sequ
     assert "scan_1.laz" not in est
     rot, trans = planar_errors(est["scan_3.laz"], world_gt(poses)[3])
     assert rot < 0.5 and trans < 0.3
-
-
-def test_killed_chain_resumes_to_the_same_outputs(sequence, tmp_path):
-    files, _ = sequence
-    files = files + files[:2]  # a longer chain: 5 links
-    clean = tmp_path / "clean"
-    assert run(files, clean, "--jobs", "1").exit_code in (0, 1)
-    out = tmp_path / "killed"
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
-    proc = subprocess.Popen(
-        [*CHAIN, *map(str, files), "--out", str(out), "--jobs", "1", "--quiet"],
-        env=env, start_new_session=True,
-    )  # fmt: skip
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and len(list((out / "links").glob("*.json"))) < 2:
-        time.sleep(0.05)
-    os.killpg(proc.pid, signal.SIGKILL)
-    proc.wait()
-    done_before = sorted(p.name for p in (out / "links").glob("*.json"))
-    assert 2 <= len(done_before) < 5, done_before
-    assert not (out / "pairs.csv").exists()
-    res = run(files, out, "--jobs", "2", "--resume")
-    assert res.exit_code in (0, 1)
-    assert outputs(out) == outputs(clean)
-    summary = json.loads((out / "summary.json").read_text())
-    assert summary["reused"] == len(done_before)
 
 
 def test_natural_sort_and_link_plan():

@@ -142,3 +142,23 @@ def test_search_includes_the_papers_zero_start_in_the_scan_frames(street):
     T_local = translation(-t.reduction) @ np.eye(4) @ translation(s.reduction)
     zero = np.array([T_local[0, 3], T_local[1, 3], 0.0])
     assert np.min(np.abs(starts - zero).sum(axis=1)) < 1e-9
+
+
+def test_corridor_is_flagged_degenerate_along_the_street_axis():
+    _, scans, poses = simulate.make_sequence(seed=3, n_scans=2, corridor=True)
+    result = ndt_cli.register(scans[0], scans[1])
+    assert result.status == "suspect"
+    flag = [w for w in result.warnings if w.startswith("degenerate")]
+    assert flag, result.warnings
+    from ndt_cli.engine import weakest_direction
+
+    direction, ratio = weakest_direction(result.hessian)
+    street_in_target = np.linalg.inv(poses[0])[:2, :2] @ np.array([1.0, 0.0])
+    assert abs(direction @ street_in_target) > 0.95 and ratio < 0.01
+
+
+def test_degeneracy_flag_does_not_fire_on_ordinary_streets(street):
+    scans, _ = street
+    for i in range(1, len(scans)):
+        result = ndt_cli.register(scans[i - 1], scans[i])
+        assert not any(w.startswith("degenerate") for w in result.warnings), result.warnings

@@ -1,0 +1,295 @@
+"""Reliability: bad input never gives a traceback or a partial file, faults never lose finished
+work, wrong results are never reported as good, and results are bit-identical run to run."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from typer.testing import CliRunner
+
+from ndt_cli import config, io, simulate
+from ndt_cli.cli import chain_app, register_app
+from ndt_cli.errors import ConfigError, InputError
+from ndt_cli.transforms import read_matrix, transform_errors
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "sample_data"
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def scans():
+    _, pts, poses = simulate.make_sequence(
+        seed=21, n_scans=4, spacing=(13.0, 17.0), scan_kwargs={"n_azimuth": 1000}
+    )
+    return pts, poses
+
+
+def _write_text(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+def _truncated(path: Path, points: np.ndarray) -> Path:
+    io.write(path, points)
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    return path
+
+
+def _points(path: Path, points: np.ndarray) -> Path:
+    io.write(path, points)
+    return path
+
+
+rng = np.random.default_rng(5)
+BAD_SOURCES = {
+    "empty ply": lambda d: _write_text(d / "e.ply", ""),
+    "empty las": lambda d: _write_text(d / "e.las", ""),
+    "empty xyz": lambda d: _write_text(d / "e.xyz", ""),
+    "header-only ply": lambda d: _write_text(
+        d / "h.ply",
+        "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\n"
+        "property float y\nproperty float z\nend_header\n",
+    ),
+    "truncated las": lambda d: _truncated(d / "t.las", rng.uniform(0, 9, (5000, 3))),
+    "truncated laz": lambda d: _truncated(d / "t.laz", rng.uniform(0, 9, (5000, 3))),
+    "truncated ply": lambda d: _truncated(d / "t.ply", rng.uniform(0, 9, (5000, 3))),
+    "truncated pcd": lambda d: _truncated(d / "t.pcd", rng.uniform(0, 9, (5000, 3))),
+    "text named las": lambda d: _write_text(d / "w.las", "1 2 3\n4 5 6\n"),
+    "non-numeric row": lambda d: _write_text(d / "n.xyz", "1 2 3\n4 5 6\nfoo bar baz\n"),
+    "all nan": lambda d: _write_text(d / "nan.xyz", "nan nan nan\ninf 1 2\n"),
+    "one point": lambda d: _write_text(d / "p1.xyz", "1 2 3\n"),
+    "two points": lambda d: _write_text(d / "p2.xyz", "1 2 3\n2 3 4\n"),
+    "three points": lambda d: _write_text(d / "p3.xyz", "1 2 3\n2 3 4\n3 4 6\n"),
+    "all in one cell": lambda d: _points(d / "cell.xyz", rng.uniform(0, 0.5, (2000, 3))),
+    "missing file": lambda d: d / "missing.laz",
+    "unknown extension": lambda d: _write_text(d / "scan.abc", "1 2 3\n"),
+    "a directory": lambda d: (d / "folder.ply").mkdir() or d / "folder.ply",
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_SOURCES))
+def test_bad_input_is_one_line_exit_2_no_traceback_no_output(case, scans, tmp_path):
+    target = _points(tmp_path / "target.laz", scans[0][0])
+    bad = BAD_SOURCES[case](tmp_path)
+    out = tmp_path / "out"
+    res = runner.invoke(register_app, [str(target), str(bad), "-o", str(out), "-q"])
+    assert res.exit_code == 2, (case, res.output)
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("ndt-register: error:"), lines
+    assert bad.name in lines[0]
+    assert ("Traceback" not in res.output and res.exception is None) or isinstance(
+        res.exception, SystemExit
+    )
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("yaml_text", "needle"),
+    [
+        ("grid:\n  cell_size: [4]\n", "grid.cell_size"),
+        ("grid:\n  cell_sizes: four\n", "grid.cell_sizes"),
+        ("grid:\n  cell_sizes: [4, -2]\n", "grid.cell_sizes[1]"),
+        ("grid:\n  cell_sizes: [2, 4]\n", "decreasing"),
+        ("slices:\n  thickness: 0\n", "slices.thickness"),
+        ("slices:\n  heights: [500.0]\n", "no points in any slice"),
+    ],
+)
+def test_bad_config_is_exit_2_and_keeps_earlier_results(yaml_text, needle, scans, tmp_path):
+    a = _points(tmp_path / "a.laz", scans[0][0])
+    b = _points(tmp_path / "b.laz", scans[0][1])
+    out = tmp_path / "out"
+    assert runner.invoke(register_app, [str(a), str(b), "-o", str(out), "-q"]).exit_code == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    cfg = _write_text(tmp_path / "c.yaml", yaml_text)
+    res = runner.invoke(register_app, [str(a), str(b), "-c", str(cfg), "-o", str(out), "-q"])
+    assert res.exit_code == 2 and needle in res.stderr and len(res.stderr.splitlines()) == 1
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before  # untouched, no temp files
+
+
+def test_a_line_of_points_is_degenerate_not_good(scans, tmp_path):
+    target = _points(tmp_path / "target.laz", scans[0][0])
+    line = _points(tmp_path / "line.xyz", np.outer(np.linspace(0, 50, 3000), [1.0, 0.3, 0.05]))
+    res = runner.invoke(register_app, [str(target), str(line), "-o", str(tmp_path / "o"), "-q"])
+    assert res.exit_code == 1
+    assert "suspect" in res.stderr and "Traceback" not in res.output
+
+
+def test_nan_rows_are_dropped_and_the_rest_registers(scans, tmp_path):
+    pts, poses = scans
+    noisy = np.vstack([pts[0], np.full((50, 3), np.nan), np.zeros((30, 3))])
+    a = _points(tmp_path / "a.xyz", noisy)
+    b = _points(tmp_path / "b.ply", pts[1])
+    res = runner.invoke(register_app, [str(a), str(b), "-o", str(tmp_path / "o")])
+    assert res.exit_code == 0
+    assert "dropped 50 non-finite and 30 (0,0,0)" in res.stderr
+    T = read_matrix(tmp_path / "o" / "T_target_source.txt")
+    rot, trans = transform_errors(T, np.linalg.inv(poses[0]) @ poses[1])
+    assert rot < 0.3 and trans < 0.15
+
+
+def test_identical_scans_and_a_scan_10_km_away(scans, tmp_path):
+    pts, _ = scans
+    a = _points(tmp_path / "a.laz", pts[0])
+    shift = np.array([10_000.0, -3_000.0, 0.0])
+    far = _points(tmp_path / "far.laz", pts[0] + shift)
+    for source, offset in [(a, np.zeros(3)), (far, shift)]:
+        res = runner.invoke(register_app, [str(a), str(source), "-o", str(tmp_path / "o"), "-q"])
+        assert res.exit_code == 0
+        T = read_matrix(tmp_path / "o" / "T_target_source.txt")
+        mapped = (pts[0] + offset) @ T[:3, :3].T + T[:3, 3]
+        assert np.abs(mapped - pts[0]).max() < 0.01  # every point back in place within 1 cm
+
+
+def test_two_different_streets_are_never_reported_as_good(scans, tmp_path):
+    _, other, _ = simulate.make_sequence(seed=77, n_scans=1, scan_kwargs={"n_azimuth": 1000})
+    a = _points(tmp_path / "a.laz", scans[0][0])
+    b = _points(tmp_path / "b.laz", other[0])
+    res = runner.invoke(register_app, [str(a), str(b), "-o", str(tmp_path / "o"), "--json"])
+    assert res.exit_code == 1
+    data = json.loads(res.stdout)
+    assert data["status"] == "suspect" and data["warnings"]
+
+
+def test_crashed_worker_fails_its_link_and_the_chain_completes(scans, tmp_path, monkeypatch):
+    pts, _ = scans
+    names = ["p0.laz", "p1.laz", "p2_crash.laz", "p3.laz"]
+    files = [_points(tmp_path / n, p) for n, p in zip(names, pts, strict=True)]
+    monkeypatch.setenv("NDT_CLI_FAULT_EXIT_ON", "register")  # workers die on 'crash' sources
+    res = runner.invoke(chain_app, [*map(str, files), "-o", str(tmp_path / "o"), "-j", "2", "-q"])
+    assert res.exit_code == 1
+    rows = (tmp_path / "o" / "pairs.csv").read_text().splitlines()[1:]
+    status = {r.split(",")[2]: r for r in rows}
+    assert "failed" in status["p2_crash.laz"] and "worker process died" in status["p2_crash.laz"]
+    assert ",ok," in status["p1.laz"] and ",ok," in status["p3.laz"]
+
+
+CHAIN = [sys.executable, "-c", "from ndt_cli.cli import chain_app; chain_app()"]
+
+
+def _links(out: Path) -> list[Path]:
+    """Finished link files (not the temporary files of a write in progress)."""
+    return [p for p in (out / "links").glob("[0-9]*.json")]
+
+
+def _wait_for_links(out: Path, n: int, proc: subprocess.Popen, limit: float = 120.0) -> None:
+    deadline = time.monotonic() + limit
+    while time.monotonic() < deadline and proc.poll() is None:
+        if len(_links(out)) >= n:
+            return
+        time.sleep(0.05)
+
+
+def test_sigint_stops_cleanly_and_resume_completes(scans, tmp_path):
+    pts, _ = scans
+    files = [_points(tmp_path / f"s{k}.laz", p) for k, p in enumerate([*pts, *pts[:2]])]
+    out = tmp_path / "o"
+    proc = subprocess.Popen(
+        [*CHAIN, *map(str, files), "-o", str(out), "-j", "1", "-q"],
+        stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    _wait_for_links(out, 1, proc)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "--resume" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    kept = _links(out)
+    assert 1 <= len(kept) < 5 and all(json.loads(p.read_text())["key"] for p in kept)
+    res = runner.invoke(chain_app, [*map(str, files), "-o", str(out), "--resume", "-q"])
+    assert res.exit_code in (0, 1)
+    assert json.loads((out / "summary.json").read_text())["reused"] == len(kept)
+
+
+@pytest.mark.parametrize("kill_after", [1, 3])
+def test_sigkill_at_several_points_then_resume_equals_clean_run(scans, tmp_path, kill_after):
+    pts, _ = scans
+    files = [_points(tmp_path / f"s{k}.laz", p) for k, p in enumerate([*pts, *pts[:2]])]
+    clean, out = tmp_path / "clean", tmp_path / "killed"
+    assert runner.invoke(chain_app, [*map(str, files), "-o", str(clean), "-q"]).exit_code in (0, 1)
+    proc = subprocess.Popen([*CHAIN, *map(str, files), "-o", str(out), "-j", "1", "-q"],
+                            start_new_session=True)  # fmt: skip
+    _wait_for_links(out, kill_after, proc)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    kept = _links(out)
+    assert kill_after <= len(kept) < 5 and not (out / "pairs.csv").exists()
+    res = runner.invoke(chain_app, [*map(str, files), "-o", str(out), "--resume", "-q"])
+    assert res.exit_code in (0, 1)
+    assert json.loads((out / "summary.json").read_text())["reused"] == len(kept)
+    for name in ["poses.txt", "poses.csv", *[p.name for p in clean.glob("T_*.txt")]]:
+        assert (out / name).read_bytes() == (clean / name).read_bytes(), name
+    assert _without_runtime(out / "pairs.csv") == _without_runtime(clean / "pairs.csv")
+
+
+def _without_runtime(path: Path) -> list[list[str]]:
+    rows = [line.split(",") for line in path.read_text().splitlines()]
+    drop = rows[0].index("runtime_s")
+    return [row[:drop] + row[drop + 1 :] for row in rows]
+
+
+def test_bit_identical_across_numba_thread_counts(tmp_path):
+    code = (
+        "import sys, ndt_cli; r = ndt_cli.register(sys.argv[1], sys.argv[2]); "
+        "print(r.T_target_source.tobytes().hex())"
+    )
+    outs = []
+    for threads in ["1", "2"]:
+        env = {**os.environ, "NUMBA_NUM_THREADS": threads, "OPENBLAS_NUM_THREADS": "1"}
+        run = subprocess.run(
+            [sys.executable, "-c", code, str(SAMPLE / "scan_00.laz"), str(SAMPLE / "scan_01.laz")],
+            env=env, capture_output=True, text=True, check=True,
+        )  # fmt: skip
+        outs.append(run.stdout.strip())
+    assert outs[0] == outs[1] and len(outs[0]) == 256
+
+
+SUFFIXES = [".ply", ".las", ".laz", ".pcd", ".xyz", ".csv"]
+
+
+@settings(
+    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(data=st.binary(max_size=2000), suffix=st.sampled_from(SUFFIXES))
+def test_readers_never_raise_anything_but_input_error(tmp_path, data, suffix):
+    path = tmp_path / f"fuzz{suffix}"
+    path.write_bytes(data)
+    try:
+        cloud = io.read(path)
+    except InputError as exc:
+        assert "\n" not in str(exc) and path.name in str(exc)
+    else:
+        assert np.isfinite(cloud.points).all() and len(cloud.points) > 0
+
+
+_scalar = st.one_of(st.none(), st.booleans(), st.integers(-5, 50), st.floats(-10, 300),
+                    st.text(max_size=5), st.lists(st.floats(-5, 300), max_size=4))  # fmt: skip
+_section = st.dictionaries(
+    st.sampled_from(["heights", "thickness", "cell_sizes", "min_points", "method", "z", "bogus"]),
+    _scalar, max_size=3,
+)  # fmt: skip
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.dictionaries(st.sampled_from(["slices", "grid", "optimizer", "ground", "nope"]),
+                       st.one_of(_section, _scalar), max_size=3))  # fmt: skip
+def test_config_is_valid_or_a_config_error(data):
+    try:
+        cfg = config.from_dict(data)
+    except ConfigError as exc:
+        assert "\n" not in str(exc)
+    else:
+        assert all(
+            b < a for a, b in zip(cfg.grid.cell_sizes, cfg.grid.cell_sizes[1:], strict=False)
+        )
+        assert cfg.slices.thickness > 0
