@@ -61,8 +61,8 @@ class OptimizerConfig:
     """The local solver run at every cell size."""
 
     method: OptimizerName = "newton"
-    max_iterations: int = 40  # per cell size and start
-    patience: int = 3  # stop after this many iterations without a better score
+    max_iterations: int = 100  # per cell size and start
+    patience: int = 5  # stop after this many iterations without a better score
     lm_lambda: float = 0.01  # lm_fixed: lambda as a multiple of mean diag(J^T J) at the level start
     max_step: float = 0.5  # largest translation step, in cell sizes
     max_rotation_step_deg: float = 15.0  # largest rotation step, degrees

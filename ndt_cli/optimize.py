@@ -29,13 +29,16 @@ from ndt_cli.config import OptimizerConfig
 from ndt_cli.kernels import ERR, GRAD, HESS, JTJ, JTR, SCORE, sym3
 
 Evaluator = Callable[[np.ndarray], np.ndarray]
+_STILL_M = 1e-3  # a best pose that moved less than this (m) ...
+_STILL_RAD = 1e-5  # ... and this (rad) over the last ``patience`` iterations has converged
 _REL_IMPROVEMENT = 1e-6  # a score must rise by this fraction to count as improved (sub-mm)
 
 
 @dataclass(frozen=True)
 class BatchResult:
     """Outcome per start: best pose (S,3), its score, iterations used, whether it converged
-    (stopped by patience rather than by ``max_iterations``), and the best score after each
+    (its score stopped improving for ``patience`` iterations, or its best pose moved less than
+    1 mm and 1e-5 rad over the last ``patience`` iterations), and the best score after each
     iteration (``trace[k]`` for iteration k, NaN once a start has stopped)."""
 
     params: np.ndarray
@@ -44,6 +47,8 @@ class BatchResult:
     converged: np.ndarray
     trace: np.ndarray
     evaluations: int
+    path: np.ndarray  # (iterations, S, 4): pose (tx, ty, phi) and score of each start's current
+    # state after every iteration (NaN once a start has stopped)
 
 
 def _newton_steps(acc: np.ndarray) -> np.ndarray:
@@ -92,6 +97,8 @@ def optimize(
     max_t = cfg.max_step * cell_size
     max_r = np.radians(cfg.max_rotation_step_deg)
     trace = []
+    history = []  # best pose of every start after each iteration
+    path = []
     while active.any():
         idx = np.flatnonzero(active)
         a = acc[idx]
@@ -121,7 +128,18 @@ def optimize(
         row = np.full(n, np.nan)
         row[idx] = best[idx]
         trace.append(row)
+        history.append(best_p.copy())
+        state = np.full((n, 4), np.nan)
+        state[idx, :3] = p[idx]
+        state[idx, 3] = acc[idx, SCORE]
+        path.append(state)
+    # converged: the score stopped improving, or the best pose stopped moving (creeping gains
+    # of cell-boundary effects can keep the score rising by tiny amounts until max_iterations)
     converged = stall >= cfg.patience
+    if len(history) > cfg.patience:
+        moved = np.abs(history[-1] - history[-1 - cfg.patience])
+        still = (np.hypot(moved[:, 0], moved[:, 1]) < _STILL_M) & (moved[:, 2] < _STILL_RAD)
+        converged |= still
     return BatchResult(
         params=best_p,
         score=best,
@@ -129,4 +147,5 @@ def optimize(
         converged=converged,
         trace=np.array(trace).reshape(-1, n),
         evaluations=evaluations,
+        path=np.array(path).reshape(-1, n, 4),
     )
