@@ -6,8 +6,10 @@ Heavy modules are imported inside the commands so that ``--help`` stays fast.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import sys
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -53,6 +55,19 @@ def _fail(exc: NdtError, prog: str) -> typer.Exit:
     return typer.Exit(exc.exit_code)
 
 
+@contextlib.contextmanager
+def _user_errors(prog: str, debug: bool, interrupted: str = "interrupted") -> Iterator[None]:
+    """Turn user errors and Ctrl-C into one line on stderr and the documented exit code."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        raise _fail(UserInterruptError(interrupted), prog) from None
+    except NdtError as exc:
+        if debug:
+            raise
+        raise _fail(exc, prog) from None
+
+
 @register_app.command(help=_REGISTER_HELP, no_args_is_help=True)
 def register(
     target: Annotated[Path, typer.Argument(help="Fixed scan (its frame is the result's frame).")],
@@ -70,7 +85,7 @@ def register(
     debug: DebugOpt = False,
 ) -> None:
     _setup_logging(quiet or json_out, verbose)
-    try:
+    with _user_errors("ndt-register", debug):
         from ndt_cli import config as config_mod
         from ndt_cli import register as run
         from ndt_cli import report
@@ -80,12 +95,6 @@ def register(
         T_init = read_matrix(init) if init is not None else None
         result = run(target, source, cfg, init=T_init)
         report.write_register_outputs(out, result, cfg)
-    except KeyboardInterrupt:
-        raise _fail(UserInterruptError("interrupted"), "ndt-register") from None
-    except NdtError as exc:
-        if debug:
-            raise
-        raise _fail(exc, "ndt-register") from None
     if json_out:
         typer.echo(report.to_json(result.to_dict()), nl=False)
     elif not quiet:
@@ -140,7 +149,8 @@ def chain(
     debug: DebugOpt = False,
 ) -> None:
     _setup_logging(quiet or json_out, verbose)
-    try:
+    resume_hint = "interrupted: finished links are kept; run again with --resume to continue"
+    with _user_errors("ndt-chain", debug, resume_hint):
         import time
 
         from ndt_cli import config as config_mod
@@ -167,13 +177,6 @@ def chain(
         runtime = time.perf_counter() - t0
         write_chain_outputs(out, result, cfg, runtime)
         write_topview(out, result, cfg)
-    except KeyboardInterrupt:
-        msg = "interrupted: finished links are kept; run again with --resume to continue"
-        raise _fail(UserInterruptError(msg), "ndt-chain") from None
-    except NdtError as exc:
-        if debug:
-            raise
-        raise _fail(exc, "ndt-chain") from None
     if json_out:
         from ndt_cli.report import to_json
 
@@ -253,16 +256,10 @@ def _write_csv(path: Path, rows: list[dict]) -> None:
     typer.echo(f"wrote {path}")
 
 
-def _run_analysis(fn, prog: str, debug: bool) -> None:
+def _run_analysis(fn: Callable[[], None], prog: str, debug: bool) -> None:
     _setup_logging(False, False)
-    try:
+    with _user_errors(prog, debug):
         fn()
-    except KeyboardInterrupt:
-        raise _fail(UserInterruptError("interrupted"), prog) from None
-    except NdtError as exc:
-        if debug:
-            raise
-        raise _fail(exc, prog) from None
 
 
 @analyze_app.command("score-profile")

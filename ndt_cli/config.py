@@ -16,7 +16,7 @@ from typing import Any, Literal
 
 import yaml
 
-from ndt_cli.errors import ConfigError
+from ndt_cli.errors import ConfigError, read_user_text
 
 OptimizerName = Literal["newton", "lm_fixed", "lm"]
 
@@ -196,12 +196,7 @@ def load(path: str | Path | None) -> Config:
     if path is None:
         return Config()
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError("config file not found", p) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"cannot read config ({exc})", p) from None
+    text = read_user_text(p, "config", ConfigError)
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:

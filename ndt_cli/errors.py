@@ -14,6 +14,20 @@ EXIT_INPUT = 2
 EXIT_INTERRUPTED = 130
 
 
+def read_user_text(path: str | Path, what: str, error: type[NdtError] | None = None) -> str:
+    """UTF-8 text of a file the user named; a missing or unreadable file raises ``error``
+    (default :class:`InputError`) with a one-line message naming the file and ``what`` it is."""
+    p = Path(path)
+    cls = error or InputError
+    try:
+        return p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise cls(f"{what} file not found", p) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        reason = getattr(exc, "strerror", None) or " ".join(str(exc).split())
+        raise cls(f"cannot read {what} ({reason})", p) from None
+
+
 class NdtError(Exception):
     """Base of all user-facing errors; ``exit_code`` is what the CLI returns."""
 

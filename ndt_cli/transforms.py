@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ndt_cli.errors import InputError
+from ndt_cli.errors import InputError, read_user_text
 
 
 def pose2d_matrix(tx: float, ty: float, yaw: float, tz: float = 0.0) -> np.ndarray:
@@ -64,12 +64,7 @@ def format_matrix(T: np.ndarray) -> str:
 def read_matrix(path: str | Path) -> np.ndarray:
     """Read a 4x4 rigid transform from a text file (16 numbers, row-major; '#' comments)."""
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError("transform file not found", p) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read transform ({exc})", p) from None
+    text = read_user_text(p, "transform")
     try:
         values = [float(v) for line in text.splitlines() for v in line.split("#")[0].split()]
     except ValueError:
@@ -91,10 +86,7 @@ def read_pose_list(path: str | Path) -> dict[str, np.ndarray]:
     A ``#`` at the start of a line or after a space starts a comment.
     """
     p = Path(path)
-    try:
-        lines = p.read_text(encoding="utf-8").splitlines()
-    except OSError as exc:
-        raise InputError(f"cannot read poses ({exc.strerror or exc})", p) from None
+    lines = read_user_text(p, "poses").splitlines()
     poses = {}
     for n, line in enumerate(lines, 1):
         fields = re.sub(r"(^|\s)#.*$", "", line).split()  # 'scans.e57#2' is a name, not a comment
