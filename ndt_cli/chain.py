@@ -248,6 +248,23 @@ class _Pool:
             self._pool = None
 
 
+def _scan_status(path: Path, cfg: Config) -> str | None:
+    """A worker task: None if the scan can be read and sliced, else the one-line reason."""
+    value = _prepare_scan(path, cfg)
+    return value if isinstance(value, str) else None
+
+
+def _register_paths(
+    index: int, i: int, j: int, target: Path, source: Path, cfg: Config, key: str
+) -> Link:
+    """A worker task that reads both scans itself (executors that do not ship scan data)."""
+    scans = [_prepare_scan(target, cfg), _prepare_scan(source, cfg)]
+    for value in scans:
+        if isinstance(value, str):
+            return Link(index, i, j, "failed", reason=value, key=key)
+    return _register_link(index, i, j, scans[0], scans[1], cfg, key)
+
+
 # ----------------------------------------------------------------------------- driver
 
 
@@ -309,8 +326,14 @@ def run_chain(
     resume: bool = False,
     anchor: int = 0,
     on_progress: Callable[[Link], None] | None = None,
+    executor: str = "local",
+    scheduler: str | None = None,
 ) -> ChainResult:
-    """Register the scans in the order given, write each link as it finishes, compose poses."""
+    """Register the scans in the order given, write each link as it finishes, compose poses.
+
+    ``executor``: ``local`` (processes on this machine, ``jobs`` of them) or ``dask`` (the
+    cluster at ``scheduler``, or a LocalCluster of ``jobs`` workers); results are the same.
+    """
     paths = [Path(p) for p in scans]
     out = Path(out)
     n = len(paths)
@@ -333,7 +356,13 @@ def run_chain(
 
     for stale in (out / LINK_FOLDER).glob(".*.tmp*"):  # left by a run that was killed
         stale.unlink(missing_ok=True)
-    pool = _Pool(jobs, threads)
+    if executor == "dask":
+        from ndt_cli.dask_executor import DaskPool
+
+        pool: Any = DaskPool(scheduler, jobs, threads)
+    else:
+        pool = _Pool(jobs, threads)
+    ships = getattr(pool, "ships_data", True)
     try:
         pairs, keys = plan()
         if resume:
@@ -344,10 +373,11 @@ def run_chain(
         # read and slice each scan that an unfinished link needs, once, in parallel
         needed = sorted({s for k, pair in enumerate(pairs) if k not in finished for s in pair})
         prepared: dict[int, Any] = {}
-        for i, value in pool.run({i: (_prepare_scan, paths[i], cfg) for i in needed}):
+        check = _prepare_scan if ships else _scan_status
+        for i, value in pool.run({i: (check, paths[i], cfg) for i in needed}):
             if isinstance(value, str):
                 unreadable[i] = value
-            else:
+            elif value is not None:
                 prepared[i] = value
         if unreadable:  # re-plan around the scans that could not be read
             pairs, keys = plan()
@@ -363,7 +393,19 @@ def run_chain(
                 reason = unreadable.get(j) or unreadable[i]
                 report(Link(index, i, j, "failed", reason=reason, key=keys[index]))
                 continue
-            todo[index] = (_register_link, index, i, j, prepared[i], prepared[j], cfg, keys[index])
+            if ships:
+                todo[index] = (
+                    _register_link,
+                    index,
+                    i,
+                    j,
+                    prepared[i],
+                    prepared[j],
+                    cfg,
+                    keys[index],
+                )
+            else:  # the worker reads both scans itself
+                todo[index] = (_register_paths, index, i, j, paths[i], paths[j], cfg, keys[index])
         for index, link in pool.run(todo):
             if isinstance(link, str):  # the worker died or raised: this link fails, not the chain
                 i, j = pairs[index]

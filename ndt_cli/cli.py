@@ -48,6 +48,8 @@ def _setup_logging(quiet: bool, verbose: bool) -> None:
     # libraries log their own failures, which reach the user as one InputError line instead
     for name in ("laspy", "numba", "matplotlib", "pye57"):
         logging.getLogger(name).setLevel(logging.DEBUG if verbose else logging.CRITICAL)
+    for name in ("distributed", "dask"):
+        logging.getLogger(name).setLevel(logging.DEBUG if verbose else logging.ERROR)
 
 
 def _fail(exc: NdtError, prog: str) -> typer.Exit:
@@ -143,6 +145,13 @@ def chain(
         bool, typer.Option(help="Reuse finished links whose inputs and config are unchanged.")
     ] = False,
     anchor: Annotated[int, typer.Option(help="Index of the scan that defines the world.")] = 0,
+    executor: Annotated[
+        str, typer.Option(help="local (processes here) or dask (a Dask cluster).")
+    ] = "local",
+    scheduler: Annotated[
+        str | None,
+        typer.Option(help="Dask scheduler address, tcp://HOST:PORT [default: a LocalCluster]."),
+    ] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
     quiet: QuietOpt = False,
     verbose: VerboseOpt = False,
@@ -167,13 +176,18 @@ def chain(
             raise ConfigError(f"--anchor {anchor} is not a scan index (0..{len(paths) - 1})")
         if jobs is not None and jobs < 1:
             raise ConfigError("--jobs must be >= 1")
+        if executor not in ("local", "dask"):
+            raise ConfigError(f"--executor must be local or dask, got {executor!r}")
+        if scheduler is not None and executor != "dask":
+            raise ConfigError("--scheduler needs --executor dask")
         if out.exists() and not out.is_dir():
             raise OutputError("output path exists and is not a folder", out)
         t0 = time.perf_counter()
         with _Progress(len(paths) - 1, enabled=not (quiet or json_out)) as advance:
             result = run_chain(
-                paths, cfg, out, jobs=jobs, resume=resume, anchor=anchor, on_progress=advance
-            )
+                paths, cfg, out, jobs=jobs, resume=resume, anchor=anchor, on_progress=advance,
+                executor=executor, scheduler=scheduler,
+            )  # fmt: skip
         runtime = time.perf_counter() - t0
         write_chain_outputs(out, result, cfg, runtime)
         write_topview(out, result, cfg)

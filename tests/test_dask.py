@@ -1,0 +1,100 @@
+"""ndt-chain on a Dask cluster: same results as the local executor, survives a lost worker."""
+
+from __future__ import annotations
+
+import os
+import signal
+
+import numpy as np
+import pytest
+
+pytest.importorskip("distributed", reason="the dask extra (dask[distributed]) is not installed")
+
+from distributed import Client, LocalCluster
+
+from ndt_cli import io, simulate
+from ndt_cli.chain import run_chain
+from ndt_cli.chain_report import write_chain_outputs
+from ndt_cli.config import Config
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    with LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0"
+    ) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("dask_seq")
+    _, scans, _ = simulate.make_sequence(
+        seed=21, n_scans=4, spacing=(13.0, 17.0), scan_kwargs={"n_azimuth": 1000}
+    )
+    out = []
+    for k, pts in enumerate(scans):
+        out.append(d / f"scan_{k}.laz")
+        io.write(out[-1], pts)
+    return out
+
+
+@pytest.fixture(scope="module")
+def local_run(files, tmp_path_factory):
+    """The chain run by the local executor, and its output folder."""
+    out = tmp_path_factory.mktemp("local")
+    return run_chain(files, Config(), out, jobs=1), out
+
+
+def _outputs(result):
+    return [
+        (link.index, link.status, None if link.T_target_source is None
+         else link.T_target_source.tobytes())
+        for link in result.links
+    ] + [None if T is None else T.tobytes() for T in result.poses]  # fmt: skip
+
+
+def test_dask_gives_the_same_results_as_local(cluster, files, local_run, tmp_path):
+    local, _ = local_run
+    cfg = Config()
+    dask = run_chain(files, cfg, tmp_path / "dask", executor="dask",
+                     scheduler=cluster.scheduler_address)  # fmt: skip
+    assert all(link.ok for link in dask.links) and len(dask.links) == 3
+    assert _outputs(dask) == _outputs(local)
+    write_chain_outputs(tmp_path / "dask", dask, cfg, 0.0)
+    write_chain_outputs(tmp_path / "local", local, cfg, 0.0)  # same outputs, same bytes
+    for name in ["poses.txt", "poses.csv"]:
+        assert (tmp_path / "dask" / name).read_bytes() == (tmp_path / "local" / name).read_bytes()
+
+
+def test_resume_skips_finished_links_before_submission(cluster, files, local_run, tmp_path):
+    local, local_out = local_run
+    import shutil
+
+    cfg = Config()
+    out = tmp_path / "o"
+    shutil.copytree(local_out / "links", out / "links")  # the finished links of the local run
+    again = run_chain(files, cfg, out, resume=True, executor="dask",
+                      scheduler=cluster.scheduler_address)  # fmt: skip
+    assert again.reused == (0, 1, 2)
+    assert _outputs(again) == _outputs(local)
+
+
+def test_a_worker_killed_mid_run_does_not_stop_the_chain(cluster, files, local_run, tmp_path):
+    cfg = Config()
+    reference, _ = local_run
+    with Client(cluster.scheduler_address) as client:
+        pids = list(client.run(os.getpid).values())
+    killed = []
+
+    def kill_one(link):  # after the first finished link, kill a worker process
+        if not killed:
+            os.kill(pids[0], signal.SIGKILL)
+            killed.append(pids[0])
+
+    result = run_chain([*files, *files[:2]], cfg, tmp_path / "o", executor="dask",
+                       scheduler=cluster.scheduler_address, on_progress=kill_one)  # fmt: skip
+    assert killed and len(result.links) == 5
+    assert all(link.status in ("ok", "suspect") for link in result.links)
+    for a, b in zip(result.links[:3], reference.links, strict=True):
+        assert np.array_equal(a.T_target_source, b.T_target_source)
