@@ -98,3 +98,13 @@ def test_a_worker_killed_mid_run_does_not_stop_the_chain(cluster, files, local_r
     assert all(link.status in ("ok", "suspect") for link in result.links)
     for a, b in zip(result.links[:3], reference.links, strict=True):
         assert np.array_equal(a.T_target_source, b.T_target_source)
+
+
+def test_a_scan_that_cannot_be_read_fails_its_link_once(cluster, files, tmp_path):
+    bad = tmp_path / "scan_1.laz"
+    bad.write_bytes(files[1].read_bytes()[:4000])  # truncated: fails for its data
+    result = run_chain([files[0], bad, files[2]], Config(), tmp_path / "o", executor="dask",
+                       scheduler=cluster.scheduler_address)  # fmt: skip
+    assert result.links[0].status == "failed" and "scan_1.laz" in result.links[0].reason
+    assert (result.links[1].target, result.links[1].source) == (0, 2)
+    assert result.unreadable and 1 in result.unreadable
