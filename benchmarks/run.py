@@ -19,7 +19,7 @@ import numpy as np
 
 import ndt_cli
 from ndt_cli.config import Config
-from ndt_cli.engine import _Maps, source_points
+from ndt_cli.engine import TargetMaps, source_points
 from ndt_cli.kernels import evaluate
 from ndt_cli.prepare import load_and_prepare
 
@@ -39,7 +39,7 @@ def best_of(fn, repeat: int = 5) -> float:
 def kernel_throughput(cfg: Config) -> None:
     target = load_and_prepare(SAMPLE / "scan_00.laz", cfg)
     source = load_and_prepare(SAMPLE / "scan_01.laz", cfg)
-    maps = _Maps(target, cfg)
+    maps = TargetMaps(target, cfg)
     src = source_points(source, cfg, cfg.source.points_per_slice)
     print(f"source slice points: {len(src)}; cells at 2 m: {maps(2.0).n_cells}")
     print(f"{'case':<34}{'threads':>8}{'evals':>12}{'time (ms)':>12}{'M evals/s':>12}")

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from ndt_cli.config import Config
-from ndt_cli.engine import _Maps, register_prepared, source_points
+from ndt_cli.engine import TargetMaps, register_prepared, source_points
 from ndt_cli.kernels import SCORE, SourcePoints, evaluate
 from ndt_cli.optimize import optimize
 from ndt_cli.prepare import PreparedScan
@@ -57,7 +57,7 @@ def rotation_profile(
     """Score as the source turns from -180 to 180 degrees about its slice centroid, for the
     first 1..k slices (the paper's figs. 3 and 11). Rows: slices, rotation_deg, score,
     score_per_point."""
-    maps = _Maps(pair.target, cfg)
+    maps = TargetMaps(pair.target, cfg)
     src = source_points(pair.source, cfg, cfg.source.points_per_slice)
     tx, ty, phi = pair.aligned
     c, s = np.cos(phi), np.sin(phi)
@@ -89,7 +89,7 @@ def translation_profile(
 ) -> list[dict[str, Any]]:
     """Score as the aligned source is shifted over a grid (target frame axes; the paper's figs. 4
     and 12), for the first 1..k slices. Rows: slices, dx_m, dy_m, score, score_per_point."""
-    maps = _Maps(pair.target, cfg)
+    maps = TargetMaps(pair.target, cfg)
     src = source_points(pair.source, cfg, cfg.source.points_per_slice)
     xs = np.arange(x_range[0], x_range[1] + 1e-9, step)
     ys = np.arange(y_range[0], y_range[1] + 1e-9, step)
@@ -157,7 +157,7 @@ def basin(
 ) -> list[dict[str, Any]]:  # fmt: skip
     """Register from many start offsets around the aligned pose, per variant (the paper's
     fig. 17). Runs in parallel processes; rows in a fixed order whatever ``jobs`` is."""
-    from ndt_cli.chain import _Pool
+    from ndt_cli.chain import WorkerPool
 
     jobs = max(1, jobs or os.cpu_count() or 1)
     chunks = np.array_split(offsets, max(1, min(len(offsets), 4 * jobs)))
@@ -167,7 +167,7 @@ def basin(
         for i, chunk in enumerate(chunks)
         if len(chunk)
     }
-    pool = _Pool(jobs, max(1, (os.cpu_count() or 1) // jobs))
+    pool = WorkerPool(jobs, max(1, (os.cpu_count() or 1) // jobs))
     try:
         results = dict(pool.run(tasks))
     finally:
@@ -205,7 +205,7 @@ def optimizer_traces(
     the target frame (of the reduced pose, i.e. relative to the reduction points)."""
     rows = []
     src = source_points(pair.source, cfg, cfg.source.points_per_slice)
-    maps = _Maps(pair.target, cfg)
+    maps = TargetMaps(pair.target, cfg)
     for method, cells in schedules.items():
         ocfg = replace(cfg.optimizer, method=method)
         offset = np.array([start_offset[0], start_offset[1], np.radians(start_offset[2])])

@@ -184,7 +184,7 @@ def _register_link(
     )
 
 
-class _Pool:
+class WorkerPool:
     """Worker processes for chain tasks that survive a worker dying.
 
     Processes are spawned, not forked: a forked child of a process whose Numba threads already
@@ -361,7 +361,7 @@ def run_chain(
 
         pool: Any = DaskPool(scheduler, jobs, threads)
     else:
-        pool = _Pool(jobs, threads)
+        pool = WorkerPool(jobs, threads)
     ships = getattr(pool, "ships_data", True)
     try:
         pairs, keys = plan()

@@ -28,7 +28,7 @@ def _in_worker(threads: int, fn: Any, *args: Any) -> Any:
 
 
 class DaskPool:
-    """The :class:`ndt_cli.chain._Pool` interface on a Dask cluster.
+    """The :class:`ndt_cli.chain.WorkerPool` interface on a Dask cluster.
 
     ``scheduler``: address of a running scheduler (``tcp://host:8786``); None starts a
     LocalCluster of ``jobs`` worker processes on this machine and prints its dashboard address.

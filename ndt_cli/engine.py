@@ -31,7 +31,7 @@ _MIN_SEPARATION_DEG = 10.0  # candidates closer than this in yaw and half a cell
 _EVIDENCE_LEVELS = 3  # finest levels whose fit-weighted scores decide between candidates
 
 
-class _Maps:
+class TargetMaps:
     """Target NDT maps, built once per cell size on first use."""
 
     def __init__(self, target: PreparedScan, cfg: Config) -> None:
@@ -152,7 +152,7 @@ def register_prepared(
 ) -> RegistrationResult:
     """Register prepared scans; ``init`` is an optional 4x4 guess of T_target_source."""
     t_start = time.perf_counter()
-    maps = _Maps(target, cfg)
+    maps = TargetMaps(target, cfg)
     cells = cfg.grid.cell_sizes
     fine = source_points(source, cfg, cfg.source.points_per_slice)
     levels: list[LevelStats] = []

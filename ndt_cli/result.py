@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -113,7 +112,3 @@ class RegistrationResult:
             "runtime_s": self.runtime_s,
             "warnings": list(self.warnings),
         }
-
-
-def path_str(p: str | Path | None) -> str | None:
-    return None if p is None else str(p)

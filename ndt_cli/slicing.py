@@ -10,8 +10,6 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ndt_cli.errors import InputError
-
 _GROUND_SAMPLE = 400_000  # points used for the height histogram
 
 
@@ -75,11 +73,3 @@ def subsample(xy: np.ndarray, cap: int, seed: int = 0) -> np.ndarray:
         return xy
     idx = np.random.default_rng(seed).choice(len(xy), size=cap, replace=False)
     return xy[np.sort(idx)]
-
-
-def require_slice_points(slices: Sequence[np.ndarray], what: str, min_points: int = 3) -> None:
-    """Raise :class:`InputError` when no slice has enough points to work with."""
-    if sum(len(s) for s in slices) < min_points:
-        raise InputError(
-            f"{what}: no points in any slice (check slices.heights and the ground level)"
-        )

@@ -78,12 +78,12 @@ def test_optimizer_traces_cover_each_method_and_end_near_the_truth(pair):
     ends = {m: [r for r in rows if r["method"] == m][-1] for m in ("newton", "lm_fixed", "lm")}
     assert abs(ends["newton"]["tx_m"] - p.aligned[0]) < 0.05
     assert abs(ends["newton"]["ty_m"] - p.aligned[1]) < 0.05
-    from ndt_cli.engine import _Maps, source_points
+    from ndt_cli.engine import TargetMaps, source_points
     from ndt_cli.kernels import evaluate
 
     start = p.aligned + np.array([1.0, -1.0, np.radians(2.0)])
     src = source_points(p.source, cfg, cfg.source.points_per_slice)
-    start_score = evaluate(_Maps(p.target, cfg)(cells[0]), src, start)[0, 0]
+    start_score = evaluate(TargetMaps(p.target, cfg)(cells[0]), src, start)[0, 0]
     for m in ("lm_fixed", "lm"):  # both raise the score of their start at the first level
         best = max(r["score"] for r in rows if r["method"] == m and r["cell_m"] == cells[0])
         assert best > start_score
