@@ -17,7 +17,7 @@ demo: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(BIN)/ndt-register sample_data/scan_00.laz sample_data/scan_01.laz --out ndt_results/pair
 	$(BIN)/python tools/demo_check.py pair ndt_results/pair sample_data/poses_T_world_scan.txt scan_00.laz scan_01.laz
 	OPENBLAS_NUM_THREADS=1 $(BIN)/ndt-chain sample_data/*.laz --out ndt_results/chain --jobs 2
-	$(BIN)/python tools/demo_check.py chain ndt_results/chain sample_data/poses_T_world_scan.txt
+	$(BIN)/ndt-eval ndt_results/chain --gt sample_data/poses_T_world_scan.txt
 
 test: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q

@@ -378,3 +378,56 @@ def optimizers_cmd(
         plots.optimizer_plot(rows, out / "optimizers.png")
 
     _run_analysis(run, "ndt-analyze", debug)
+
+
+eval_app = typer.Typer(add_completion=False, pretty_exceptions_enable=False)
+
+
+@eval_app.command(no_args_is_help=True)
+def evaluate_cmd(
+    result_dir: Annotated[Path, typer.Argument(help="Output folder of ndt-chain or ndt-register.")],
+    gt: Annotated[
+        Path,
+        typer.Option(
+            help="Reference: 'name' + 16 numbers (T_world_scan) or 'target source' + "
+            "16 numbers (T_target_source) per line."
+        ),
+    ],
+    json_out: Annotated[bool, typer.Option("--json", help="Print the evaluation as JSON.")] = False,
+    debug: DebugOpt = False,
+) -> None:
+    """Rotation (deg) and translation (m) error of every link against a reference, success rates
+    at 2 deg / 10 cm and 0.1 deg / 2 cm, and the end-of-chain drift. Writes eval.csv and
+    eval.json into RESULT_DIR."""
+    _setup_logging(json_out, False)
+    with _user_errors("ndt-eval", debug):
+        from ndt_cli import atomic
+        from ndt_cli.evaluate import evaluate
+        from ndt_cli.report import csv_text, to_json
+
+        ev = evaluate(result_dir, gt)
+        columns = ("target", "source", "rotation_error_deg", "translation_error_m")
+        atomic.write_text(result_dir / "eval.csv", csv_text(ev.links, columns))
+        atomic.write_text(result_dir / "eval.json", to_json(ev.to_dict()))
+    if json_out:
+        typer.echo(to_json(ev.to_dict()), nl=False)
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table("target", "source", "rotation error (deg)", "translation error (cm)",
+                  title="ndt-eval")  # fmt: skip
+    for row in ev.links:
+        table.add_row(row["target"], row["source"], f"{row['rotation_error_deg']:.4f}",
+                      f"{100 * row['translation_error_m']:.2f}")  # fmt: skip
+    console = Console()
+    console.print(table)
+    for s in ev.success:
+        console.print(f"success at {s['max_rotation_deg']:g} deg / {100 * s['max_translation_m']:g}"
+                      f" cm: {100 * s['success_rate']:.0f} %")  # fmt: skip
+    if ev.drift:
+        d = ev.drift
+        console.print(
+            f"end-of-chain drift ({d['to']} in the frame of {d['from']}): "
+            f"{d['rotation_error_deg']:.4f} deg, {100 * d['translation_error_m']:.2f} cm"
+        )

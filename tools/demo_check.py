@@ -1,13 +1,11 @@
-"""Print the errors of ndt-register / ndt-chain results against the sample data's ground truth.
+"""Print the error of an ndt-register result against the sample data's ground truth.
 
-Usage:
-    python tools/demo_check.py pair RESULT_DIR POSES_FILE TARGET_NAME SOURCE_NAME
-    python tools/demo_check.py chain CHAIN_DIR POSES_FILE
+Usage: python tools/demo_check.py pair RESULT_DIR POSES_FILE TARGET_NAME SOURCE_NAME
+(chains are evaluated by ``ndt-eval``)
 """
 
 from __future__ import annotations
 
-import itertools
 import sys
 from pathlib import Path
 
@@ -33,27 +31,5 @@ def pair(result_dir: str, poses_file: str, target: str, source: str) -> int:
     return 0
 
 
-def chain(chain_dir: str, poses_file: str) -> int:
-    gt = read_pose_list(poses_file)
-    est = read_pose_list(Path(chain_dir) / "poses.txt")
-    names = sorted(gt)
-    print("link errors against ground truth:")
-    for a, b in itertools.pairwise(names):
-        T = read_matrix(Path(chain_dir) / f"T_{Path(a).stem}_{Path(b).stem}.txt")
-        print(_line(f"{b} -> {a}", T, np.linalg.inv(gt[a]) @ gt[b]))
-    world = np.linalg.inv(gt[names[0]])
-    last = names[-1]
-    if last in est:
-        rot, trans = transform_errors(est[last], world @ gt[last])
-        print(
-            f"end-of-chain drift ({last} in the frame of {names[0]}): "
-            f"{rot:.4f} deg, {trans * 100:.2f} cm"
-        )
-    else:
-        print(f"end-of-chain drift: {last} has no pose (a link failed)")
-    return 0
-
-
 if __name__ == "__main__":
-    cmd, *args = sys.argv[1:]
-    sys.exit(pair(*args) if cmd == "pair" else chain(*args))
+    sys.exit(pair(*sys.argv[2:]))
