@@ -25,3 +25,17 @@ def shared_data(name: str) -> Path:
 def shared_data_dir() -> Path:
     """Root of the shared real data (may not exist; use :func:`shared_data` for a folder)."""
     return SHARED_DATA
+
+
+def street_files(folder: Path, n_scans: int = 4, seed: int = 21) -> tuple[list[Path], list]:
+    """A short simulated street written as LAZ files ``scan_K.laz``; returns (files, poses)."""
+    from ndt_cli import io, simulate
+
+    _, scans, poses = simulate.make_sequence(
+        seed=seed, n_scans=n_scans, spacing=(13.0, 17.0), scan_kwargs={"n_azimuth": 1000}
+    )
+    files = []
+    for k, pts in enumerate(scans):
+        files.append(folder / f"scan_{k}.laz")
+        io.write(files[-1], pts)
+    return files, poses

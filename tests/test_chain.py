@@ -8,10 +8,10 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import shared_data
+from conftest import shared_data, street_files
 from typer.testing import CliRunner
 
-from ndt_cli import io, simulate
+from ndt_cli import simulate
 from ndt_cli.chain import natural_sort, plan_links
 from ndt_cli.cli import chain_app
 from ndt_cli.transforms import read_matrix, read_pose_list, yaw_of
@@ -27,15 +27,7 @@ def planar_errors(T, T_ref):
 
 @pytest.fixture(scope="module")
 def sequence(tmp_path_factory):
-    d = tmp_path_factory.mktemp("seq")
-    _, scans, poses = simulate.make_sequence(
-        seed=21, n_scans=4, spacing=(13.0, 17.0), scan_kwargs={"n_azimuth": 1000}
-    )
-    files = []
-    for k, pts in enumerate(scans):
-        files.append(d / f"scan_{k}.laz")
-        io.write(files[-1], pts)
-    return files, poses
+    return street_files(tmp_path_factory.mktemp("seq"))
 
 
 def world_gt(poses):

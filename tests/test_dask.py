@@ -10,9 +10,9 @@ import pytest
 
 pytest.importorskip("distributed", reason="the dask extra (dask[distributed]) is not installed")
 
+from conftest import street_files
 from distributed import Client, LocalCluster
 
-from ndt_cli import io, simulate
 from ndt_cli.chain import run_chain
 from ndt_cli.chain_report import write_chain_outputs
 from ndt_cli.config import Config
@@ -28,15 +28,7 @@ def cluster():
 
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
-    d = tmp_path_factory.mktemp("dask_seq")
-    _, scans, _ = simulate.make_sequence(
-        seed=21, n_scans=4, spacing=(13.0, 17.0), scan_kwargs={"n_azimuth": 1000}
-    )
-    out = []
-    for k, pts in enumerate(scans):
-        out.append(d / f"scan_{k}.laz")
-        io.write(out[-1], pts)
-    return out
+    return street_files(tmp_path_factory.mktemp("dask_seq"))[0]
 
 
 @pytest.fixture(scope="module")
