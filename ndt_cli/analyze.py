@@ -20,7 +20,7 @@ from ndt_cli.engine import TargetMaps, register_prepared, source_points
 from ndt_cli.kernels import SCORE, SourcePoints, evaluate
 from ndt_cli.optimize import optimize
 from ndt_cli.prepare import PreparedScan
-from ndt_cli.transforms import pose2d_matrix, translation, wrap_angle, yaw_of
+from ndt_cli.transforms import pose2d_matrix, wrap_angle, yaw_of
 
 
 @dataclass(frozen=True)
@@ -37,13 +37,12 @@ class Pair:
     ) -> Pair:
         """``at``: 4x4 T_target_source of the aligned pose; None registers the pair first."""
         T = register_prepared(target, source, cfg).T_target_source if at is None else at
-        local = translation(-target.reduction) @ T @ translation(source.reduction)
+        local = target.to_local() @ T @ source.from_local()
         return cls(target, source, np.array([local[0, 3], local[1, 3], yaw_of(local)]))
 
     def to_matrix(self, p: np.ndarray) -> np.ndarray:
         """4x4 T_target_source of a reduced-frame pose."""
-        T = pose2d_matrix(*p, tz=0.0)
-        return translation(self.target.reduction) @ T @ translation(-self.source.reduction)
+        return self.target.from_local() @ pose2d_matrix(*p, tz=0.0) @ self.source.to_local()
 
 
 def _first_slices(src: SourcePoints, k: int) -> SourcePoints:
@@ -130,9 +129,7 @@ def _basin_task(
     for dx, dy, dyaw in offsets:
         start = aligned + np.array([dx, dy, np.radians(dyaw)])
         result = register_prepared(target, source, vcfg, init=pair.to_matrix(start))
-        local = (
-            translation(-target.reduction) @ result.T_target_source @ translation(source.reduction)
-        )
+        local = target.to_local() @ result.T_target_source @ source.from_local()
         err_t = float(np.hypot(local[0, 3] - aligned[0], local[1, 3] - aligned[1]))
         err_r = float(abs(np.degrees(wrap_angle(yaw_of(local) - aligned[2]))))
         rows.append(

@@ -121,7 +121,8 @@ def preview(scan: Any, max_points: int = 4000) -> np.ndarray:
     xy = np.concatenate(scan.slices)
     step = max(1, len(xy) // max_points)
     xyz = np.column_stack([xy[::step], np.zeros(len(xy[::step]))])
-    return xyz + scan.reduction
+    T = scan.from_local()
+    return xyz @ T[:3, :3].T + T[:3, 3]
 
 
 # ----------------------------------------------------------------------------- workers

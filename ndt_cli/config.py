@@ -27,6 +27,7 @@ class GroundConfig:
 
     z: float | None = None  # fixed ground level for both scans; None = estimate per scan
     bin_size: float = 0.05  # height histogram bin for the estimate, m
+    level: bool = True  # estimate roll/pitch from the ground plane and level each scan
 
 
 @dataclass(frozen=True)

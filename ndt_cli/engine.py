@@ -25,7 +25,7 @@ from ndt_cli.optimize import optimize
 from ndt_cli.prepare import PreparedScan
 from ndt_cli.result import Candidate, LevelStats, RegistrationResult
 from ndt_cli.slicing import subsample, voxel_filter_2d
-from ndt_cli.transforms import pose2d_matrix, translation, wrap_angle, yaw_of
+from ndt_cli.transforms import pose2d_matrix, wrap_angle, yaw_of
 
 _MIN_SEPARATION_DEG = 10.0  # candidates closer than this in yaw and half a cell apart are one
 _EVIDENCE_LEVELS = 3  # finest levels whose fit-weighted scores decide between candidates
@@ -68,7 +68,6 @@ def search_starts(target: PreparedScan, source: PreparedScan, cfg: Config) -> np
     pose that aligns the slice centroids, plus every start yaw at zero translation in the scans'
     own frames (the paper's p0 = 0)."""
     c_target, c_source = target.centroid(), source.centroid()
-    r_target, r_source = target.reduction[:2], source.reduction[:2]
     s = cfg.search
     yaws = 2 * np.pi * np.arange(s.yaw_starts) / s.yaw_starts
     n = int(np.floor(s.translation_range / s.translation_step + 1e-9))
@@ -80,7 +79,8 @@ def search_starts(target: PreparedScan, source: PreparedScan, cfg: Config) -> np
         c, si = np.cos(yaw), np.sin(yaw)
         R = np.array([[c, -si], [si, c]])
         starts.append(np.column_stack([c_target - R @ c_source + grid, np.full(len(grid), yaw)]))
-        starts.append(np.array([[*(R @ r_source - r_target), yaw]]))
+        zero = target.to_local() @ pose2d_matrix(0.0, 0.0, yaw) @ source.from_local()
+        starts.append(np.array([[zero[0, 3], zero[1, 3], yaw_of(zero)]]))
     return np.concatenate(starts)
 
 
@@ -181,9 +181,7 @@ def register_prepared(
         )
         schedule = cells[1:] if len(cells) > 1 else cells
     else:
-        T_local = (
-            translation(-target.reduction) @ np.asarray(init, float) @ translation(source.reduction)
-        )
+        T_local = target.to_local() @ np.asarray(init, float) @ source.from_local()
         cands = np.array([[T_local[0, 3], T_local[1, 3], yaw_of(T_local)]])
         schedule = cells
 
@@ -255,7 +253,7 @@ def register_prepared(
     else:
         status = "suspect" if warnings else "ok"
     T_local = pose2d_matrix(p[0], p[1], p[2])
-    T = translation(target.reduction) @ T_local @ translation(-source.reduction)
+    T = target.from_local() @ T_local @ source.to_local()
     return RegistrationResult(
         T_target_source=T,
         status=status,

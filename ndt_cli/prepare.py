@@ -9,14 +9,15 @@ heights are simply z values.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ndt_cli.config import Config
 from ndt_cli.errors import InputError
-from ndt_cli.slicing import cut_slices, estimate_ground
+from ndt_cli.slicing import cut_slices, estimate_ground, fit_ground_plane
+from ndt_cli.transforms import levelling_rotation, rotation4, rotation_angle_deg, translation
 
 log = logging.getLogger(__name__)
 
@@ -26,10 +27,24 @@ class PreparedScan:
     """A scan cut into slices. ``slices[k]`` is (n_k, 2) float64, metres, reduced frame."""
 
     path: Path | None
-    reduction: np.ndarray  # (3,) float64: scan frame = reduced frame + reduction
+    reduction: np.ndarray  # (3,) float64: a point of the ground plane below the bounding-box centre
     ground_z: float  # ground level, scan frame (= reduction[2])
     slices: tuple[np.ndarray, ...]
     n_points: int
+    level: np.ndarray = field(default_factory=lambda: np.eye(3))  # scan axes -> levelled axes
+
+    def to_local(self) -> np.ndarray:
+        """4x4 from the scan frame to the reduced, levelled frame: q = L (p - reduction)."""
+        return rotation4(self.level) @ translation(-self.reduction)
+
+    def from_local(self) -> np.ndarray:
+        """4x4 from the reduced, levelled frame back to the scan frame."""
+        return translation(self.reduction) @ rotation4(self.level.T)
+
+    @property
+    def tilt_deg(self) -> float:
+        """Angle (degrees) between the scan's z axis and the ground normal."""
+        return rotation_angle_deg(self.level)
 
     @property
     def label(self) -> str:
@@ -73,6 +88,13 @@ def prepare(points: np.ndarray, cfg: Config, path: Path | None = None) -> Prepar
         )
     reduction = np.array([centre_xy[0], centre_xy[1], ground])
     local = points - reduction
+    level = np.eye(3)
+    if cfg.ground.level and cfg.ground.z is None:
+        a, b, c = fit_ground_plane(local)
+        reduction[2] += c  # the reduction point lies on the ground plane
+        ground = float(reduction[2])
+        level = levelling_rotation(a, b)
+        local = (points - reduction) @ level.T
     slices = cut_slices(local, 0.0, cfg.slices.heights, cfg.slices.thickness)
     n_slice = sum(len(s) for s in slices)
     if n_slice < cfg.grid.min_points:
@@ -81,7 +103,7 @@ def prepare(points: np.ndarray, cfg: Config, path: Path | None = None) -> Prepar
             f"(ground found at z = {ground:.2f}); check slices.heights or set ground.z",
             path,
         )
-    return PreparedScan(path, reduction, ground, tuple(slices), len(points))
+    return PreparedScan(path, reduction, ground, tuple(slices), len(points), level)
 
 
 def load_and_prepare(scan: str | Path | np.ndarray, cfg: Config) -> PreparedScan:

@@ -36,6 +36,28 @@ def estimate_ground(z: np.ndarray, bin_size: float = 0.05) -> float:
     return float(np.median(near)) if near.size else mode
 
 
+def fit_ground_plane(
+    points: np.ndarray, band: float = 0.3, iterations: int = 4
+) -> tuple[float, float, float]:
+    """Ground plane ``z = a x + b y + c`` (metres) of points whose ground is near z = 0.
+
+    Least squares on the points within ``band`` of the current plane, repeated with a band that
+    narrows to a third; outliers (kerbs, cars, low walls) leave the band. ``a`` and ``b`` are
+    the slopes that a tilted scanner sees on level ground.
+    """
+    pts = points if len(points) <= _GROUND_SAMPLE else points[:: len(points) // _GROUND_SAMPLE + 1]
+    a = b = c = 0.0
+    for k in range(iterations):
+        width = band * (1.0 - 2.0 * k / (3.0 * max(iterations - 1, 1)))
+        near = np.abs(pts[:, 2] - (a * pts[:, 0] + b * pts[:, 1] + c)) <= width
+        if near.sum() < 3:
+            break
+        g = pts[near]
+        A = np.column_stack([g[:, 0], g[:, 1], np.ones(len(g))])
+        a, b, c = np.linalg.lstsq(A, g[:, 2], rcond=None)[0]
+    return float(a), float(b), float(c)
+
+
 def cut_slices(
     points: np.ndarray, ground_z: float, heights: Sequence[float], thickness: float
 ) -> list[np.ndarray]:

@@ -108,3 +108,23 @@ def rotation_to_quaternion(R: np.ndarray) -> np.ndarray:
 
     x, y, z, w = Rotation.from_matrix(R).as_quat()
     return np.array([w, x, y, z])
+
+
+def levelling_rotation(a: float, b: float) -> np.ndarray:
+    """3x3 rotation that turns the plane ``z = a x + b y`` horizontal (its normal onto +z),
+    without a turn about z."""
+    n = np.array([-a, -b, 1.0]) / np.sqrt(a * a + b * b + 1.0)
+    axis = np.cross(n, [0.0, 0.0, 1.0])
+    s, c = np.linalg.norm(axis), n[2]
+    if s < 1e-15:
+        return np.eye(3)
+    k = axis / s
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + s * K + (1 - c) * K @ K
+
+
+def rotation4(R: np.ndarray) -> np.ndarray:
+    """4x4 of a 3x3 rotation."""
+    T = np.eye(4)
+    T[:3, :3] = R
+    return T

@@ -139,8 +139,8 @@ def test_search_includes_the_papers_zero_start_in_the_scan_frames(street):
     starts = search_starts(t, s, cfg)
     assert len(starts) == cfg.search.yaw_starts * (9 * 9 + 1)
     # identity in the scans' own frames, expressed in the reduced frames
-    T_local = translation(-t.reduction) @ np.eye(4) @ translation(s.reduction)
-    zero = np.array([T_local[0, 3], T_local[1, 3], 0.0])
+    T_local = t.to_local() @ np.eye(4) @ s.from_local()
+    zero = np.array([T_local[0, 3], T_local[1, 3], yaw_of(T_local)])
     assert np.min(np.abs(starts - zero).sum(axis=1)) < 1e-9
 
 
@@ -162,3 +162,20 @@ def test_degeneracy_flag_does_not_fire_on_ordinary_streets(street):
     for i in range(1, len(scans)):
         result = ndt_cli.register(scans[i - 1], scans[i])
         assert not any(w.startswith("degenerate") for w in result.warnings), result.warnings
+
+
+def test_tilted_scanners_are_levelled_from_their_ground():
+    from ndt_cli.transforms import transform_errors
+
+    _, scans, poses = simulate.make_sequence(seed=101, n_scans=3, tilt_deg=0.5)
+    unlevelled = Config().replace(ground={"level": False})
+    worst_unlevelled = 0.0
+    for i in (1, 2):
+        ref = relative(poses, i - 1, i)
+        rot, trans = transform_errors(ndt_cli.register(scans[i - 1], scans[i]).T_target_source, ref)
+        assert rot < 0.05 and trans < 0.02, (i, rot, trans)  # full 3D rotation and translation
+        rot_u, _ = transform_errors(
+            ndt_cli.register(scans[i - 1], scans[i], unlevelled).T_target_source, ref
+        )
+        worst_unlevelled = max(worst_unlevelled, rot_u)
+    assert worst_unlevelled > 0.1  # the tilt is really there
