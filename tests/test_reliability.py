@@ -122,8 +122,15 @@ def test_a_line_of_points_is_degenerate_not_good(scans, tmp_path):
     target = _points(tmp_path / "target.laz", scans[0][0])
     line = _points(tmp_path / "line.xyz", np.outer(np.linspace(0, 50, 3000), [1.0, 0.3, 0.05]))
     res = runner.invoke(register_app, [str(target), str(line), "-o", str(tmp_path / "o"), "-q"])
-    assert res.exit_code == 1
-    assert "suspect" in res.stderr and "Traceback" not in res.output
+    # never "ok": levelled to its own slope the line leaves no slice points (exit 2); without
+    # levelling it registers but is degenerate (exit 1)
+    assert res.exit_code == 2 and "no points in any slice" in res.stderr, res.stderr
+    assert "Traceback" not in res.output
+    cfg = _write_text(tmp_path / "c.yaml", "ground:\n  level: false\n")
+    res = runner.invoke(
+        register_app, [str(target), str(line), "-c", str(cfg), "-o", str(tmp_path / "o"), "-q"]
+    )
+    assert res.exit_code == 1 and "suspect" in res.stderr, res.stderr
 
 
 def test_nan_rows_are_dropped_and_the_rest_registers(scans, tmp_path):
