@@ -82,6 +82,19 @@ class SearchConfig:
 
 
 @dataclass(frozen=True)
+class RefineConfig:
+    """3D refinement after NDT: robust point-to-plane ICP in full 6-DOF."""
+
+    method: Literal["none", "icp"] = "icp"
+    voxel: float = 0.1  # 3D thinning of both scans before ICP, m
+    max_distance: float = 1.0  # first correspondence distance, m (shrinks by 0.7 per iteration)
+    min_distance: float = 0.1  # final correspondence distance, m
+    huber: float = 0.05  # Huber threshold of the point-to-plane residuals, m
+    iterations: int = 40
+    max_correction: float = 1.0  # larger ICP changes (m, or this many degrees) are not trusted
+
+
+@dataclass(frozen=True)
 class QualityConfig:
     """Thresholds below which a converged registration is reported as suspect."""
 
@@ -101,6 +114,7 @@ class Config:
     source: SourceConfig = field(default_factory=SourceConfig)
     optimizer: OptimizerConfig = field(default_factory=OptimizerConfig)
     search: SearchConfig = field(default_factory=SearchConfig)
+    refine: RefineConfig = field(default_factory=RefineConfig)
     quality: QualityConfig = field(default_factory=QualityConfig)
 
     def __post_init__(self) -> None:
@@ -254,6 +268,9 @@ def _validate(c: Config) -> None:
     positive("search.translation_step", c.search.translation_step)
     positive("search.points_per_slice", c.search.points_per_slice)
     positive("search.keep_candidates", c.search.keep_candidates)
+    for key in ("voxel", "max_distance", "min_distance", "huber", "max_correction"):
+        positive(f"refine.{key}", getattr(c.refine, key))
+    positive("refine.iterations", c.refine.iterations)
     q = c.quality
     if (
         q.min_score_per_point < 0

@@ -23,9 +23,10 @@ from ndt_cli.grid import NDTMap, build_map
 from ndt_cli.kernels import HESS, MATCHED, SCORE, SourcePoints, evaluate, sym3
 from ndt_cli.optimize import optimize
 from ndt_cli.prepare import PreparedScan
+from ndt_cli.refine import IcpResult, icp
 from ndt_cli.result import Candidate, LevelStats, RegistrationResult
 from ndt_cli.slicing import subsample, voxel_filter_2d
-from ndt_cli.transforms import pose2d_matrix, wrap_angle, yaw_of
+from ndt_cli.transforms import pose2d_matrix, transform_errors, translation, wrap_angle, yaw_of
 
 _MIN_SEPARATION_DEG = 10.0  # candidates closer than this in yaw and half a cell apart are one
 _EVIDENCE_LEVELS = 3  # finest levels whose fit-weighted scores decide between candidates
@@ -133,6 +134,23 @@ def weakest_direction(H: np.ndarray) -> tuple[np.ndarray, float]:
     if w[1] <= 0:
         return V[:, 0], 0.0
     return V[:, 0], float(max(w[0], 0.0) / w[1])
+
+
+def _refine(
+    target: PreparedScan, source: PreparedScan, T: np.ndarray, cfg: Config
+) -> tuple[np.ndarray, IcpResult | None, str]:
+    """ICP in the target's reduced frame; an implausibly large correction is not applied."""
+    r = cfg.refine
+    if target.points3d is None or source.points3d is None:
+        return T, None, ""
+    T_red = translation(-target.reduction) @ T @ translation(source.reduction)
+    res = icp(target.points3d, source.points3d, T_red, voxel=r.voxel,
+              max_distance=r.max_distance, min_distance=r.min_distance, huber=r.huber,
+              iterations=r.iterations)  # fmt: skip
+    moved_deg, moved_m = transform_errors(res.T, T_red)
+    if not np.isfinite(res.rms) or moved_m > r.max_correction or moved_deg > r.max_correction:
+        return T, res, f"ICP refinement rejected (it moved {moved_m:.2f} m, {moved_deg:.2f} deg)"
+    return translation(target.reduction) @ res.T @ translation(-source.reduction), res, ""
 
 
 def _pairs(ndt: NDTMap, src: SourcePoints) -> int:
@@ -254,6 +272,12 @@ def register_prepared(
         status = "suspect" if warnings else "ok"
     T_local = pose2d_matrix(p[0], p[1], p[2])
     T = target.from_local() @ T_local @ source.to_local()
+    refined = None
+    if cfg.refine.method == "icp" and status in ("ok", "suspect"):
+        T, refined, note = _refine(target, source, T, cfg)
+        if note:
+            warnings.append(note)
+            status = "suspect"
     return RegistrationResult(
         T_target_source=T,
         status=status,
@@ -276,4 +300,6 @@ def register_prepared(
         target=target.label,
         source=source.label,
         warnings=tuple(warnings),
+        icp_rms=float("nan") if refined is None else refined.rms,
+        icp_inliers=0 if refined is None else refined.inliers,
     )

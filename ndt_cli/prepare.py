@@ -32,6 +32,7 @@ class PreparedScan:
     slices: tuple[np.ndarray, ...]
     n_points: int
     level: np.ndarray = field(default_factory=lambda: np.eye(3))  # scan axes -> levelled axes
+    points3d: np.ndarray | None = None  # thinned 3D points minus the reduction (for ICP), m
 
     def to_local(self) -> np.ndarray:
         """4x4 from the scan frame to the reduced, levelled frame: q = L (p - reduction)."""
@@ -103,7 +104,12 @@ def prepare(points: np.ndarray, cfg: Config, path: Path | None = None) -> Prepar
             f"(ground found at z = {ground:.2f}); check slices.heights or set ground.z",
             path,
         )
-    return PreparedScan(path, reduction, ground, tuple(slices), len(points), level)
+    thin = None
+    if cfg.refine.method == "icp":
+        from ndt_cli.refine import voxel_thin
+
+        thin = voxel_thin(points - reduction, cfg.refine.voxel)
+    return PreparedScan(path, reduction, ground, tuple(slices), len(points), level, thin)
 
 
 def load_and_prepare(scan: str | Path | np.ndarray, cfg: Config) -> PreparedScan:

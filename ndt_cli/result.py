@@ -61,6 +61,8 @@ class RegistrationResult:
     target: str | None = None
     source: str | None = None
     warnings: tuple[str, ...] = field(default=())
+    icp_rms: float = float("nan")  # RMS of the inlier point-to-plane distances after ICP, m
+    icp_inliers: int = 0
 
     @property
     def ok(self) -> bool:
@@ -111,4 +113,6 @@ class RegistrationResult:
             "ground_z_source": self.ground_z_source,
             "runtime_s": self.runtime_s,
             "warnings": list(self.warnings),
+            "icp_rms": self.icp_rms,
+            "icp_inliers": self.icp_inliers,
         }
