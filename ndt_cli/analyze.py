@@ -112,7 +112,10 @@ BASIN_VARIANTS = ("1 slice, single start", "all slices, single start", "all slic
 def _variant_config(cfg: Config, variant: str) -> Config:
     if variant.startswith("1 slice"):
         cfg = cfg.replace(slices={"heights": list(cfg.slices.heights[:1])})
-    return cfg.replace(search={"refine_offsets": variant.endswith("multi-start")})
+    # the NDT basin itself: no ICP after it
+    return cfg.replace(
+        search={"refine_offsets": variant.endswith("multi-start")}, refine={"method": "none"}
+    )
 
 
 def _basin_task(

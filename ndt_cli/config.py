@@ -89,7 +89,7 @@ class RefineConfig:
     voxel: float = 0.1  # 3D thinning of both scans before ICP, m
     max_distance: float = 1.0  # first correspondence distance, m (shrinks by 0.7 per iteration)
     min_distance: float = 0.1  # final correspondence distance, m
-    huber: float = 0.05  # Huber threshold of the point-to-plane residuals, m
+    huber: float = 0.02  # Huber threshold of the point-to-plane residuals, m
     iterations: int = 40
     max_correction: float = 1.0  # larger ICP changes (m, or this many degrees) are not trusted
 

@@ -14,6 +14,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
+_MIN_PLANARITY = 0.7  # target points whose neighbourhood is not clearly planar are not used
+
 
 @dataclass(frozen=True)
 class IcpResult:
@@ -59,7 +61,7 @@ def icp(
     max_distance: float = 1.0,
     min_distance: float = 0.1,
     iterations: int = 40,
-    huber: float = 0.05,
+    huber: float = 0.02,
     max_source_points: int = 20_000,
 ) -> IcpResult:
     """Refine ``T0`` (source -> target) by robust point-to-plane ICP."""
@@ -77,7 +79,7 @@ def icp(
         p = src @ T[:3, :3].T + T[:3, 3]
         d, j = tree.query(p, distance_upper_bound=dist)
         ok = np.isfinite(d)
-        ok[ok] &= planarity[j[ok]] > 0.3
+        ok[ok] &= planarity[j[ok]] > _MIN_PLANARITY
         if ok.sum() < 6:
             break
         pi, ni = p[ok], n[j[ok]]
