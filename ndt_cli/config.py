@@ -231,6 +231,27 @@ def dump(config: Config) -> str:
     return yaml.safe_dump(config.to_dict(), sort_keys=False)
 
 
+# config keys whose value must be > 0
+_POSITIVE = (
+    "source.points_per_slice",
+    "optimizer.max_iterations",
+    "optimizer.patience",
+    "optimizer.lm_lambda",
+    "optimizer.max_step",
+    "optimizer.max_rotation_step_deg",
+    "search.yaw_starts",
+    "search.translation_step",
+    "search.points_per_slice",
+    "search.keep_candidates",
+    "refine.voxel",
+    "refine.max_distance",
+    "refine.min_distance",
+    "refine.huber",
+    "refine.max_correction",
+    "refine.iterations",
+)  # fmt: skip
+
+
 def _validate(c: Config) -> None:
     def positive(key: str, value: float) -> None:
         if not value > 0:
@@ -256,21 +277,11 @@ def _validate(c: Config) -> None:
     positive("grid.min_variance", c.grid.min_variance)
     if c.source.voxel < 0:
         raise ConfigError("'source.voxel' must be >= 0")
-    positive("source.points_per_slice", c.source.points_per_slice)
-    positive("optimizer.max_iterations", c.optimizer.max_iterations)
-    positive("optimizer.patience", c.optimizer.patience)
-    positive("optimizer.lm_lambda", c.optimizer.lm_lambda)
-    positive("optimizer.max_step", c.optimizer.max_step)
-    positive("optimizer.max_rotation_step_deg", c.optimizer.max_rotation_step_deg)
-    positive("search.yaw_starts", c.search.yaw_starts)
     if c.search.translation_range < 0:
         raise ConfigError("'search.translation_range' must be >= 0")
-    positive("search.translation_step", c.search.translation_step)
-    positive("search.points_per_slice", c.search.points_per_slice)
-    positive("search.keep_candidates", c.search.keep_candidates)
-    for key in ("voxel", "max_distance", "min_distance", "huber", "max_correction"):
-        positive(f"refine.{key}", getattr(c.refine, key))
-    positive("refine.iterations", c.refine.iterations)
+    for key in _POSITIVE:
+        section, name = key.split(".")
+        positive(key, getattr(getattr(c, section), name))
     q = c.quality
     if (
         q.min_score_per_point < 0
