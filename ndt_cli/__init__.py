@@ -43,5 +43,7 @@ def register(
     cfg = config if isinstance(config, config_mod.Config) else config_mod.load(config)
     tgt = load_and_prepare(target, cfg)
     src = load_and_prepare(source, cfg)
+    t_read = time.perf_counter() - t0
     result = register_prepared(tgt, src, cfg, init)
-    return replace(result, runtime_s=time.perf_counter() - t0)
+    timings = {"read_prepare_s": t_read, **result.timings}
+    return replace(result, runtime_s=time.perf_counter() - t0, timings=timings)

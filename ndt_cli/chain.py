@@ -69,7 +69,7 @@ class Link:
     index: int
     target: int
     source: int
-    status: str  # ok | suspect | not_converged | no_overlap | failed
+    status: str  # ok | degenerate | suspect | not_converged | no_overlap | failed
     reason: str = ""
     T_target_source: np.ndarray | None = None
     score: float = float("nan")
@@ -80,6 +80,11 @@ class Link:
     runtime_s: float = 0.0
     key: str = ""
     levels: str = ""  # per cell size: iterations, score and time of the winning start
+    ambiguity: float = float("nan")
+    overlap_3d: float = float("nan")
+    icp_rms: float = float("nan")
+    icp_inliers: int = 0
+    degenerate: str = ""
 
     @property
     def ok(self) -> bool:
@@ -178,6 +183,11 @@ def _register_link(
         converged=r.converged,
         runtime_s=r.runtime_s,
         key=key,
+        ambiguity=r.ambiguity,
+        overlap_3d=r.overlap_3d,
+        icp_rms=r.icp_rms,
+        icp_inliers=r.icp_inliers,
+        degenerate=r.degenerate,
         levels="  ".join(
             f"{lv.cell_size:g} m: {lv.iterations} it, score {lv.score:.0f}, {lv.time_s:.2f} s"
             for lv in r.levels

@@ -19,7 +19,8 @@ log = logging.getLogger(__name__)
 
 PAIR_COLUMNS = (
     "link", "target", "source", "tx", "ty", "tz", "yaw_deg", "score", "score_per_point",
-    "overlap", "iterations", "converged", "runtime_s", "status", "reason",
+    "overlap", "ambiguity", "overlap_3d", "icp_rms", "icp_inliers", "degenerate", "iterations",
+    "converged", "runtime_s", "status", "reason",
 )  # fmt: skip
 POSE_COLUMNS = (
     "scan", "file", "has_pose", "x", "y", "z", "yaw_deg",
@@ -45,6 +46,11 @@ def pair_row(link: Link, scans: tuple[Path, ...]) -> dict[str, Any]:
         "score": _num(link.score, 4),
         "score_per_point": _num(link.score_per_point),
         "overlap": _num(link.overlap, 4),
+        "ambiguity": _num(link.ambiguity, 4),
+        "overlap_3d": _num(link.overlap_3d, 4),
+        "icp_rms": _num(link.icp_rms, 5),
+        "icp_inliers": link.icp_inliers,
+        "degenerate": link.degenerate,
         "iterations": link.iterations,
         "converged": str(link.converged).lower(),
         "runtime_s": f"{link.runtime_s:.3f}",
@@ -76,7 +82,8 @@ def summary(result: ChainResult, runtime_s: float) -> dict[str, Any]:
         "links": len(result.links),
         "ok": statuses.count("ok"),
         "suspect": statuses.count("suspect"),
-        "failed": len(statuses) - statuses.count("ok") - statuses.count("suspect"),
+        "degenerate": statuses.count("degenerate"),
+        "failed": len(statuses) - sum(statuses.count(s) for s in ("ok", "suspect", "degenerate")),
         "unreadable": {result.scans[i].name: r for i, r in result.unreadable.items()},
         "scans_without_pose": [
             result.scans[i].name for i, T in enumerate(result.poses) if T is None

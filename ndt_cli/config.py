@@ -14,11 +14,24 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+import numpy as np
 import yaml
 
 from ndt_cli.errors import ConfigError, read_user_text
 
 OptimizerName = Literal["newton", "lm_fixed", "lm"]
+
+
+@dataclass(frozen=True)
+class InputConfig:
+    """How a file's coordinates become the scanner frame the method works in: metres,
+    right-handed, z up (roughly along gravity)."""
+
+    scale: float = 1.0  # file units to metres, e.g. 0.01 for centimetres
+    axes: str = "x,y,z"  # file axis that becomes x, y, z, with a sign: "z,-x,y" for x-right y-up
+    min_range: float = 0.0  # drop points nearer than this to the origin (tripod, vehicle), m
+    max_range: float | None = None  # drop points farther than this from the origin, m (None: keep)
+    chunk_points: int = 2_000_000  # LAS/LAZ with more points are streamed in chunks this big
 
 
 @dataclass(frozen=True)
@@ -102,12 +115,14 @@ class QualityConfig:
     min_overlap: float = 0.2  # share of source slice points inside a target cell
     max_ambiguity: float = 0.95  # second-best candidate's evidence over the best's
     min_constraint_ratio: float = 0.01  # weakest / strongest translation curvature of the score
+    overlap_distance: float = 0.2  # 3D overlap: a source point needs a target point this near, m
 
 
 @dataclass(frozen=True)
 class Config:
     """All settings of a registration."""
 
+    input: InputConfig = field(default_factory=InputConfig)
     ground: GroundConfig = field(default_factory=GroundConfig)
     slices: SlicesConfig = field(default_factory=SlicesConfig)
     grid: GridConfig = field(default_factory=GridConfig)
@@ -170,6 +185,10 @@ def _convert(value: Any, tp: Any, key: str) -> Any:
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ConfigError(f"'{key}' must be an integer, got {value!r}")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"'{key}' must be a string, got {value!r}")
         return value
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, int | float):
@@ -249,7 +268,28 @@ _POSITIVE = (
     "refine.huber",
     "refine.max_correction",
     "refine.iterations",
+    "quality.overlap_distance",
+    "input.chunk_points",
 )  # fmt: skip
+
+
+def axes_matrix(axes: str) -> np.ndarray:
+    """3x3 matrix A of an ``input.axes`` string: scanner-frame point = A @ file point.
+
+    >>> axes_matrix("z,-x,y").astype(int).tolist()
+    [[0, 0, 1], [-1, 0, 0], [0, 1, 0]]
+    """
+    parts = [p.strip().lower() for p in axes.split(",")]
+    names = [p.lstrip("+-") for p in parts]
+    if len(parts) != 3 or sorted(names) != ["x", "y", "z"] or any(len(p) > 2 for p in parts):
+        raise ConfigError(
+            f"'input.axes' must name x, y and z once each, with an optional sign "
+            f'(e.g. "z,-x,y"), got {axes!r}'
+        )
+    A = np.zeros((3, 3))
+    for row, (part, name) in enumerate(zip(parts, names, strict=True)):
+        A[row, "xyz".index(name)] = -1.0 if part.startswith("-") else 1.0
+    return A
 
 
 def _validate(c: Config) -> None:
@@ -257,6 +297,12 @@ def _validate(c: Config) -> None:
         if not value > 0:
             raise ConfigError(f"'{key}' must be > 0, got {value}")
 
+    positive("input.scale", c.input.scale)
+    axes_matrix(c.input.axes)
+    if c.input.min_range < 0 or (
+        c.input.max_range is not None and not c.input.max_range > c.input.min_range
+    ):
+        raise ConfigError("'input': need 0 <= min_range < max_range")
     if c.ground.z is not None and not -1e7 < c.ground.z < 1e7:
         raise ConfigError(f"'ground.z' is implausible: {c.ground.z}")
     positive("ground.bin_size", c.ground.bin_size)

@@ -39,9 +39,11 @@ class TargetMaps:
         self._target = target
         self._cfg = cfg
         self._maps: dict[float, NDTMap] = {}
+        self.build_s = 0.0  # time spent building maps, s
 
     def __call__(self, cell: float) -> NDTMap:
         if cell not in self._maps:
+            t0 = time.perf_counter()
             g = self._cfg.grid
             self._maps[cell] = build_map(
                 self._target.slices,
@@ -51,6 +53,7 @@ class TargetMaps:
                 min_variance=g.min_variance,
                 overlap=g.overlap,
             )
+            self.build_s += time.perf_counter() - t0
         return self._maps[cell]
 
 
@@ -146,7 +149,8 @@ def _refine(
     T_red = translation(-target.reduction) @ T @ translation(source.reduction)
     res = icp(target.points3d, source.points3d, T_red, voxel=r.voxel,
               max_distance=r.max_distance, min_distance=r.min_distance, huber=r.huber,
-              iterations=r.iterations)  # fmt: skip
+              iterations=r.iterations,
+              overlap_distance=cfg.quality.overlap_distance)  # fmt: skip
     moved_deg, moved_m = transform_errors(res.T, T_red)
     if not np.isfinite(res.rms) or moved_m > r.max_correction or moved_deg > r.max_correction:
         return T, res, f"ICP refinement rejected (it moved {moved_m:.2f} m, {moved_deg:.2f} deg)"
@@ -264,20 +268,39 @@ def register_prepared(
         ]
         if bad
     ]
+    degenerate = (
+        f"translation along ({weak[0]:.2f}, {weak[1]:.2f}, 0.00)"
+        if constraint < q.min_constraint_ratio
+        else ""
+    )
+    T_local = pose2d_matrix(p[0], p[1], p[2])
+    T = target.from_local() @ T_local @ source.to_local()
+    refined = None
+    t_ndt = time.perf_counter() - t_start
+    if cfg.refine.method == "icp" and score > 0.0 and converged:
+        T, refined, note = _refine(target, source, T, cfg)
+        if note:
+            warnings.append(note)
+        elif refined is not None:
+            weak3, constraint3 = refined.weakest_translation()
+            weak3 = target.level @ weak3  # as seen in the levelled target frame
+            if constraint3 < q.min_constraint_ratio:
+                warnings.append(
+                    f"degenerate (ICP): translation along ({weak3[0]:.2f}, {weak3[1]:.2f}, "
+                    f"{weak3[2]:.2f}) is weakly constrained (ratio {constraint3:.4f} < "
+                    f"{q.min_constraint_ratio})"
+                )
+                degenerate = degenerate or (
+                    f"translation along ({weak3[0]:.2f}, {weak3[1]:.2f}, {weak3[2]:.2f})"
+                )
     if score <= 0.0:
         status = "no_overlap"
     elif not converged:
         status = "not_converged"
+    elif degenerate:
+        status = "degenerate"
     else:
         status = "suspect" if warnings else "ok"
-    T_local = pose2d_matrix(p[0], p[1], p[2])
-    T = target.from_local() @ T_local @ source.to_local()
-    refined = None
-    if cfg.refine.method == "icp" and status in ("ok", "suspect"):
-        T, refined, note = _refine(target, source, T, cfg)
-        if note:
-            warnings.append(note)
-            status = "suspect"
     return RegistrationResult(
         T_target_source=T,
         status=status,
@@ -302,4 +325,12 @@ def register_prepared(
         warnings=tuple(warnings),
         icp_rms=float("nan") if refined is None else refined.rms,
         icp_inliers=0 if refined is None else refined.inliers,
+        icp_hessian=None if refined is None else refined.hessian,
+        overlap_3d=float("nan") if refined is None else refined.overlap,
+        degenerate=degenerate,
+        timings={
+            "grid_s": maps.build_s,
+            "ndt_s": t_ndt - maps.build_s,
+            "refine_s": time.perf_counter() - t_start - t_ndt,
+        },
     )

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import logging
 import re
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol, runtime_checkable
@@ -81,7 +83,13 @@ class LasReader:
     def __init__(self, chunk_size: int | None = None) -> None:
         self.chunk_size = chunk_size  # None: LAS_CHUNK_SIZE at read time
 
-    def read_xyz(self, path: Path) -> np.ndarray:
+    def count(self, path: Path) -> int:
+        """Points announced by the header (the file is not read further)."""
+        with laspy.open(path) as reader:
+            return int(reader.header.point_count)
+
+    def iter_xyz(self, path: Path, chunk_size: int | None = None) -> Iterator[np.ndarray]:
+        """Raw (m,3) float64 chunks of at most ``chunk_size`` points, in file order."""
         with laspy.open(path) as reader:
             header = reader.header
             n = int(header.point_count)
@@ -94,19 +102,21 @@ class LasReader:
                         f"file has {size} bytes",
                         path,
                     )
-            out = np.empty((n, 3), dtype=np.float64)
             filled = 0
-            for chunk in reader.chunk_iterator(self.chunk_size or LAS_CHUNK_SIZE):
+            for chunk in reader.chunk_iterator(chunk_size or self.chunk_size or LAS_CHUNK_SIZE):
                 m = len(chunk)
                 if filled + m > n:
                     raise InputError(f"file holds more points than its header's {n}", path)
-                out[filled : filled + m, 0] = chunk.x
-                out[filled : filled + m, 1] = chunk.y
-                out[filled : filled + m, 2] = chunk.z
+                out = np.empty((m, 3), dtype=np.float64)
+                out[:, 0], out[:, 1], out[:, 2] = chunk.x, chunk.y, chunk.z
                 filled += m
+                yield out
         if filled != n:
             raise InputError(f"truncated file: header announces {n} points, found {filled}", path)
-        return out
+
+    def read_xyz(self, path: Path) -> np.ndarray:
+        chunks = list(self.iter_xyz(path))
+        return np.concatenate(chunks) if chunks else np.empty((0, 3))
 
 
 class PcdReader:
@@ -156,7 +166,7 @@ class TextReader:
     after the first data row, blank and comment lines are allowed but any other row is an error.
     """
 
-    suffixes = (".xyz", ".txt", ".csv")
+    suffixes = (".xyz", ".txt", ".csv", ".3d")  # .3d: 3DTK's plain "x y z" lines
 
     def read_xyz(self, path: Path) -> np.ndarray:
         try:
@@ -254,11 +264,8 @@ def _unknown_suffix(path: Path) -> str:
     )
 
 
-def read(path: str | Path) -> PointCloud:
-    """Read a point file (format chosen by extension) and drop non-finite and (0,0,0) points.
-
-    Raises :class:`InputError` (one line, naming the file) for anything wrong with the file.
-    """
+def _open(path: str | Path) -> tuple[Path, PointReader]:
+    """The path and its reader, after the checks every format shares."""
     from ndt_cli.e57 import split_spec
 
     p = Path(path)
@@ -269,15 +276,68 @@ def read(path: str | Path) -> PointCloud:
         raise InputError("is a directory, not a point file", p)
     reader = _reader_for(f)
     try:
-        if f.stat().st_size == 0:
-            raise InputError("file is empty", p)
-        raw = np.asarray(reader.read_xyz(p), dtype=np.float64).reshape(-1, 3)
+        empty = f.stat().st_size == 0
+    except OSError as exc:
+        raise InputError(f"cannot read ({exc.strerror or _one_line(exc)})", p) from exc
+    if empty:
+        raise InputError("file is empty", p)
+    return p, reader
+
+
+@contextmanager
+def _file_errors(p: Path) -> Iterator[None]:
+    """Turn any library failure while reading ``p`` into a one-line :class:`InputError`."""
+    try:
+        yield
     except NdtError:
         raise
     except OSError as exc:
         raise InputError(f"cannot read ({exc.strerror or _one_line(exc)})", p) from exc
     except Exception as exc:  # any library failure is a problem with the file
         raise InputError(f"not a valid or complete {p.suffix} file: {_one_line(exc)}", p) from exc
+
+
+def count(path: str | Path) -> int | None:
+    """Points a file announces in its header (LAS/LAZ), or None for formats without a count."""
+    p, reader = _open(path)
+    if not isinstance(reader, LasReader):
+        return None
+    with _file_errors(p):
+        return reader.count(p)
+
+
+def read_chunks(path: str | Path, chunk_size: int | None = None) -> Iterator[np.ndarray]:
+    """The usable points of a file as (m,3) float64 chunks in file order: LAS/LAZ are streamed
+    ``chunk_size`` points at a time (memory stays bounded), other formats come as one chunk.
+    Non-finite and (0,0,0) points are dropped; errors as in :func:`read`."""
+    p, reader = _open(path)
+    n_read = n_kept = 0
+    with _file_errors(p):
+        raws = (
+            reader.iter_xyz(p, chunk_size)
+            if isinstance(reader, LasReader)
+            else iter([np.asarray(reader.read_xyz(p), dtype=np.float64).reshape(-1, 3)])
+        )
+        for raw in raws:
+            keep = np.isfinite(raw).all(axis=1) & ~(raw == 0.0).all(axis=1)
+            n_read += len(raw)
+            n_kept += int(keep.sum())
+            if keep.any():
+                yield raw if keep.all() else raw[keep]
+    if n_read == 0:
+        raise InputError("no points in file", p)
+    if n_kept == 0:
+        raise InputError(f"no usable points: all {n_read} are NaN/inf or (0,0,0)", p)
+
+
+def read(path: str | Path) -> PointCloud:
+    """Read a point file (format chosen by extension) and drop non-finite and (0,0,0) points.
+
+    Raises :class:`InputError` (one line, naming the file) for anything wrong with the file.
+    """
+    p, reader = _open(path)
+    with _file_errors(p):
+        raw = np.asarray(reader.read_xyz(p), dtype=np.float64).reshape(-1, 3)
     n_read = len(raw)
     if n_read == 0:
         raise InputError("no points in file", p)

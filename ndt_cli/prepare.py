@@ -9,17 +9,21 @@ heights are simply z values.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ndt_cli.config import Config
+from ndt_cli.config import Config, InputConfig, axes_matrix
 from ndt_cli.errors import InputError
+from ndt_cli.geometry import VoxelThinner, dominant_up
 from ndt_cli.slicing import cut_slices, estimate_ground, fit_ground_plane
 from ndt_cli.transforms import levelling_rotation, rotation4, rotation_angle_deg, translation
 
 log = logging.getLogger(__name__)
+
+_SAMPLE = 400_000  # points of the regular sample for the ground and the levelling
 
 
 @dataclass(frozen=True)
@@ -57,13 +61,36 @@ class PreparedScan:
         return np.median(xy, axis=0) if len(xy) else np.zeros(2)
 
 
-def load_points(scan: str | Path | np.ndarray) -> tuple[np.ndarray, Path | None]:
-    """(N,3) float64 points of a file path or an array (non-finite and (0,0,0) points dropped)."""
-    if isinstance(scan, str | Path):
-        from ndt_cli import io
+def _in_frame(points: np.ndarray, inp: InputConfig) -> np.ndarray:
+    """``input.axes``, ``input.scale`` and the range limits applied to (N,3) file points."""
+    if inp.axes.replace(" ", "") != "x,y,z" or inp.scale != 1.0:
+        points = points @ (inp.scale * axes_matrix(inp.axes)).T
+    if inp.max_range is not None or inp.min_range > 0:
+        r2 = np.einsum("ij,ij->i", points, points)
+        keep = r2 >= inp.min_range**2
+        if inp.max_range is not None:
+            keep &= r2 <= inp.max_range**2
+        points = points[keep]
+    return np.ascontiguousarray(points)
 
-        cloud = io.read(scan)
-        return cloud.points, cloud.path
+
+def _no_points_in_range(inp: InputConfig, path: Path | None) -> InputError:
+    return InputError(
+        f"no point between input.min_range and input.max_range "
+        f"({inp.min_range} to {inp.max_range} m from the scanner)",
+        path,
+    )
+
+
+def to_scanner_frame(points: np.ndarray, inp: InputConfig, path: Path | None = None) -> np.ndarray:
+    """Apply ``input.axes``, ``input.scale`` and the range limits to (N,3) file points."""
+    out = _in_frame(points, inp)
+    if len(out) == 0:
+        raise _no_points_in_range(inp, path)
+    return out
+
+
+def _usable_array(scan: np.ndarray) -> np.ndarray:
     pts = np.asarray(scan, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] < 3:
         raise InputError(f"expected an (N,3) array of points, got shape {pts.shape}")
@@ -74,45 +101,124 @@ def load_points(scan: str | Path | np.ndarray) -> tuple[np.ndarray, Path | None]
         pts = pts[keep]
     if len(pts) == 0:
         raise InputError("the array holds no usable points")
-    return np.ascontiguousarray(pts), None
+    return pts
+
+
+def load_points(
+    scan: str | Path | np.ndarray, inp: InputConfig | None = None
+) -> tuple[np.ndarray, Path | None]:
+    """(N,3) float64 points of a file path or an array in the scanner frame (metres, z up; see
+    :class:`~ndt_cli.config.InputConfig`). Non-finite and (0,0,0) points are dropped."""
+    inp = inp or InputConfig()
+    if isinstance(scan, str | Path):
+        from ndt_cli import io
+
+        cloud = io.read(scan)
+        return to_scanner_frame(cloud.points, inp, cloud.path), cloud.path
+    return to_scanner_frame(_usable_array(scan), inp), None
+
+
+@dataclass(frozen=True)
+class ScanChunks:
+    """A scan as a re-iterable sequence of (m,3) float64 chunks in the scanner frame.
+
+    Files with more than ``input.chunk_points`` points (LAS/LAZ) are streamed and read twice, so
+    memory grows with the chunk and the points kept, not with the file; smaller files and arrays
+    are one chunk held in memory.
+    """
+
+    chunks: Callable[[], Iterable[np.ndarray]]
+    n_points: int  # points announced (the file's count before dropping unusable ones)
+    path: Path | None
+
+    @classmethod
+    def of(cls, scan: str | Path | np.ndarray, inp: InputConfig) -> ScanChunks:
+        if not isinstance(scan, str | Path):
+            pts = to_scanner_frame(_usable_array(scan), inp)
+            return cls(lambda: (pts,), len(pts), None)
+        from ndt_cli import io
+
+        path = Path(scan)
+        n = io.count(path)
+        if n is not None and n > inp.chunk_points:
+            return cls(
+                lambda: (_in_frame(c, inp) for c in io.read_chunks(path, inp.chunk_points)),
+                n,
+                path,
+            )
+        pts, _ = load_points(path, inp)
+        return cls(lambda: (pts,), len(pts), path)
 
 
 def prepare(points: np.ndarray, cfg: Config, path: Path | None = None) -> PreparedScan:
-    """Find the reduction point and ground level of a scan and cut its slices."""
-    lo, hi = points.min(axis=0), points.max(axis=0)
-    centre_xy = np.round(0.5 * (lo[:2] + hi[:2]))
-    if cfg.ground.z is not None:
-        ground = float(cfg.ground.z)
-    else:
-        ground = estimate_ground(points[:, 2] - np.round(lo[2]), cfg.ground.bin_size) + np.round(
-            lo[2]
-        )
-    reduction = np.array([centre_xy[0], centre_xy[1], ground])
-    local = points - reduction
+    """Find the reduction point and ground level of a scan held in memory and cut its slices."""
+    return prepare_chunks(ScanChunks(lambda: (points,), len(points), path), cfg)
+
+
+def _first_pass(scan: ScanChunks, cfg: Config) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Bounding box, a regular-stride sample of at most ``_SAMPLE`` points, and the count."""
+    stride = scan.n_points // _SAMPLE + 1
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    parts, seen = [], 0
+    for c in scan.chunks():
+        if len(c) == 0:
+            continue
+        lo, hi = np.minimum(lo, c.min(axis=0)), np.maximum(hi, c.max(axis=0))
+        parts.append(c[(-seen) % stride :: stride])
+        seen += len(c)
+    if seen == 0:
+        raise _no_points_in_range(cfg.input, scan.path)
+    return lo, hi, np.concatenate(parts), seen
+
+
+def prepare_chunks(scan: ScanChunks, cfg: Config) -> PreparedScan:
+    """Find the reduction point and ground level of a scan and cut its slices.
+
+    Two passes over the chunks: the first takes the bounding box and a regular sample for the
+    ground and the levelling; the second cuts the slices and thins the points for ICP.
+    """
+    lo, hi, sample, n_points = _first_pass(scan, cfg)
+    path = scan.path
+    centre = np.array([*np.round(0.5 * (lo[:2] + hi[:2])), np.round(lo[2])])
     level = np.eye(3)
-    if cfg.ground.level and cfg.ground.z is None:
-        a, b, c = fit_ground_plane(local)
-        reduction[2] += c  # the reduction point lies on the ground plane
-        ground = float(reduction[2])
-        level = levelling_rotation(a, b)
-        local = (points - reduction) @ level.T
-    slices = cut_slices(local, 0.0, cfg.slices.heights, cfg.slices.thickness)
+    if cfg.ground.z is not None:
+        reduction = np.array([centre[0], centre[1], float(cfg.ground.z)])
+    else:
+        rel = sample - centre
+        if cfg.ground.level:  # coarse: the dominant up direction (tilts of many degrees)
+            u = dominant_up(rel)
+            level = levelling_rotation(-u[0] / u[2], -u[1] / u[2])
+            rel = rel @ level.T
+        offset = np.array([0.0, 0.0, estimate_ground(rel[:, 2], cfg.ground.bin_size)])
+        fine = np.eye(3)
+        if cfg.ground.level:  # fine: the plane of the ground itself
+            a, b, c = fit_ground_plane(rel - offset)
+            offset[2] += c  # the reduction point lies on the ground plane
+            fine = levelling_rotation(a, b)
+        reduction = centre + level.T @ offset
+        level = fine @ level
+    ground = float(reduction[2])
+    heights = cfg.slices.heights
+    parts: list[list[np.ndarray]] = [[] for _ in heights]
+    thinner = VoxelThinner(cfg.refine.voxel) if cfg.refine.method == "icp" else None
+    for c in scan.chunks():
+        rel = c - reduction
+        for k, part in enumerate(cut_slices(rel @ level.T, 0.0, heights, cfg.slices.thickness)):
+            parts[k].append(part)
+        if thinner is not None:
+            thinner.add(rel)
+    slices = [np.concatenate(p) if len(p) != 1 else p[0] for p in parts]
     n_slice = sum(len(s) for s in slices)
     if n_slice < cfg.grid.min_points:
         raise InputError(
-            f"no points in any slice at heights {list(cfg.slices.heights)} m above the ground "
+            f"no points in any slice at heights {list(heights)} m above the ground "
             f"(ground found at z = {ground:.2f}); check slices.heights or set ground.z",
             path,
         )
-    thin = None
-    if cfg.refine.method == "icp":
-        from ndt_cli.refine import voxel_thin
-
-        thin = voxel_thin(points - reduction, cfg.refine.voxel)
-    return PreparedScan(path, reduction, ground, tuple(slices), len(points), level, thin)
+    thin = None if thinner is None else thinner.result()
+    return PreparedScan(path, reduction, ground, tuple(slices), n_points, level, thin)
 
 
 def load_and_prepare(scan: str | Path | np.ndarray, cfg: Config) -> PreparedScan:
-    """:func:`load_points` then :func:`prepare`."""
-    pts, path = load_points(scan)
-    return prepare(pts, cfg, path)
+    """Read a scan (streamed when large, see :class:`ScanChunks`) and :func:`prepare_chunks` it."""
+    return prepare_chunks(ScanChunks.of(scan, cfg.input), cfg)

@@ -14,42 +14,41 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
+from ndt_cli.geometry import normals, voxel_thin
+
 _MIN_PLANARITY = 0.7  # target points whose neighbourhood is not clearly planar are not used
 
 
 @dataclass(frozen=True)
 class IcpResult:
     """Refined 4x4 (source to target, the frames of the inputs), RMS of the inlier point-to-plane
-    distances (m), inlier count, iterations, and the eigenvalues of the 6x6 normal matrix
-    (rotation vector rad, translation m) at the solution: a small one means a weak direction."""
+    distances (m), inlier count, iterations, the 6x6 normal matrix ``hessian`` of the weighted
+    point-to-plane residuals at the solution (rotation vector rad about the centroid of the
+    matched points, then translation m; axes of the inputs), and ``overlap``: the share of the
+    (thinned) source points with a target point within ``overlap_distance`` after alignment."""
 
     T: np.ndarray
     rms: float
     inliers: int
     iterations: int
-    hessian_eigenvalues: np.ndarray
+    hessian: np.ndarray
+    overlap: float
 
+    @property
+    def hessian_eigenvalues(self) -> np.ndarray:
+        """Eigenvalues of :attr:`hessian`, ascending (units mix rad and m)."""
+        return np.linalg.eigvalsh(self.hessian)
 
-def voxel_thin(points: np.ndarray, voxel: float) -> np.ndarray:
-    """One point (the centroid) per ``voxel`` metre cube."""
-    ijk = np.floor(points / voxel).astype(np.int64)
-    ijk -= ijk.min(axis=0)
-    dims = ijk.max(axis=0) + 1
-    keys = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
-    _, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
-    out = np.column_stack([np.bincount(inverse, weights=points[:, k]) for k in range(3)])
-    return out / counts[:, None]
-
-
-def normals(points: np.ndarray, tree: cKDTree, k: int = 12) -> tuple[np.ndarray, np.ndarray]:
-    """Unit normals from the covariance of each point's ``k`` neighbours, and a planarity in
-    [0, 1] (1 - smallest/middle eigenvalue) to drop points without a clear plane."""
-    _, idx = tree.query(points, k=k)
-    nb = points[idx]
-    d = nb - nb.mean(axis=1, keepdims=True)
-    cov = np.einsum("nki,nkj->nij", d, d) / k
-    w, V = np.linalg.eigh(cov)
-    return V[:, :, 0], 1.0 - w[:, 0] / np.maximum(w[:, 1], 1e-12)
+    def weakest_translation(self) -> tuple[np.ndarray, float]:
+        """Least constrained translation direction (unit 3-vector) and the ratio of the smallest
+        to the largest eigenvalue of the translation information once rotation is free (the
+        Schur complement of the rotation block): near 0 means a shift along the direction
+        barely changes the residuals, as along a straight corridor."""
+        H = self.hessian
+        Hrr, Hrt, Htt = H[:3, :3], H[:3, 3:], H[3:, 3:]
+        S = Htt - Hrt.T @ np.linalg.solve(Hrr + 1e-12 * np.eye(3), Hrt)
+        w, V = np.linalg.eigh(0.5 * (S + S.T))
+        return V[:, 0], float(w[0] / w[-1]) if w[-1] > 0 else 0.0
 
 
 def icp(
@@ -63,6 +62,7 @@ def icp(
     iterations: int = 40,
     huber: float = 0.02,
     max_source_points: int = 20_000,
+    overlap_distance: float = 0.2,
 ) -> IcpResult:
     """Refine ``T0`` (source -> target) by robust point-to-plane ICP."""
     tgt = voxel_thin(target, voxel)
@@ -75,6 +75,7 @@ def icp(
     it = 0
     H = np.zeros((6, 6))
     rms, inliers = float("nan"), 0
+    pi = ni = w = np.zeros((0, 3))
     for it in range(1, iterations + 1):  # noqa: B007
         p = src @ T[:3, :3].T + T[:3, 3]
         d, j = tree.query(p, distance_upper_bound=dist)
@@ -101,4 +102,8 @@ def icp(
         dist = max(min_distance, 0.7 * dist)
         if np.linalg.norm(x[:3]) < 1e-6 and np.linalg.norm(x[3:]) < 1e-5 and dist == min_distance:
             break
-    return IcpResult(T, rms, inliers, it, np.linalg.eigvalsh(H))
+    if len(pi):  # the curvature about the matched points' centroid: independent of the frame
+        J = np.column_stack([np.cross(pi - pi.mean(axis=0), ni), ni])
+        H = (J * w[:, None]).T @ J
+    d, _ = tree.query(src @ T[:3, :3].T + T[:3, 3], distance_upper_bound=overlap_distance)
+    return IcpResult(T, rms, inliers, it, H, float(np.isfinite(d).mean()))

@@ -29,10 +29,18 @@ REPORT_COLUMNS = (
     "score",
     "score_per_point",
     "overlap",
+    "ambiguity",
+    "overlap_3d",
+    "icp_rms",
+    "icp_inliers",
+    "hessian_eigenvalues",
+    "icp_hessian_eigenvalues",
+    "degenerate",
     "points_per_slice",
     "iterations_per_level",
     "converged",
     "status",
+    "warnings",
     "runtime_s",
 )
 
@@ -63,10 +71,18 @@ def report_row(result: RegistrationResult) -> dict[str, Any]:
         "score": f"{result.score:.4f}",
         "score_per_point": f"{result.score_per_point:.6f}",
         "overlap": f"{result.overlap:.4f}",
+        "ambiguity": f"{result.ambiguity:.4f}",
+        "overlap_3d": f"{result.overlap_3d:.4f}",
+        "icp_rms": f"{result.icp_rms:.5f}",
+        "icp_inliers": str(result.icp_inliers),
+        "hessian_eigenvalues": ";".join(f"{v:.6g}" for v in result.hessian_eigenvalues),
+        "icp_hessian_eigenvalues": ";".join(f"{v:.6g}" for v in result.icp_hessian_eigenvalues),
+        "degenerate": result.degenerate,
         "points_per_slice": ";".join(str(n) for n in result.points_per_slice),
         "iterations_per_level": ";".join(str(level.iterations) for level in result.levels),
         "converged": str(result.converged).lower(),
         "status": result.status,
+        "warnings": " | ".join(result.warnings),
         "runtime_s": f"{result.runtime_s:.3f}",
     }
 
@@ -108,6 +124,11 @@ def print_summary(result: RegistrationResult, console: Any) -> None:
     head.add_row("score / point", f"{result.score_per_point:.4f}")
     head.add_row("overlap", f"{result.overlap:.3f}")
     head.add_row("second candidate / best", f"{result.ambiguity:.3f}")
+    if result.icp_hessian is not None:
+        head.add_row("ICP inlier RMS (m)", f"{result.icp_rms:.4f} ({result.icp_inliers} inliers)")
+        head.add_row("3D overlap", f"{result.overlap_3d:.3f}")
+    if result.degenerate:
+        head.add_row("degenerate", result.degenerate)
     head.add_row("runtime (s)", f"{result.runtime_s:.2f}")
     for warning in result.warnings:
         head.add_row("warning", warning)

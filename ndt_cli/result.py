@@ -39,10 +39,15 @@ class RegistrationResult:
     """Outcome of registering SOURCE onto TARGET.
 
     ``T_target_source`` (4x4) maps source points into the target frame: ``p_t = T @ p_s``.
-    ``status`` is ``ok``; ``suspect`` (converged, but below a quality threshold: see ``warnings``);
+    ``status`` is ``ok``; ``degenerate`` (converged, but a translation direction is weakly
+    constrained, as along a straight corridor: ``degenerate`` names it, in the levelled target
+    frame); ``suspect`` (converged, but below a quality threshold: see ``warnings``);
     ``not_converged``; or ``no_overlap`` (score zero). ``converged``: the finest level stopped
     because its score stopped improving.
-    ``hessian`` is the 3x3 Hessian of f = -score in (tx [m], ty [m], yaw [rad]) at the solution.
+    ``hessian`` is the 3x3 Hessian of f = -score in (tx [m], ty [m], yaw [rad]) at the solution;
+    ``icp_hessian`` the 6x6 normal matrix of ICP (rotation vector [rad], translation [m]; target
+    frame), None without ICP. ``overlap_3d``: share of the moving scan's thinned points with a
+    target point within ``quality.overlap_distance`` after ICP (NaN without ICP).
     """
 
     T_target_source: np.ndarray
@@ -63,6 +68,10 @@ class RegistrationResult:
     warnings: tuple[str, ...] = field(default=())
     icp_rms: float = float("nan")  # RMS of the inlier point-to-plane distances after ICP, m
     icp_inliers: int = 0
+    icp_hessian: np.ndarray | None = None
+    overlap_3d: float = float("nan")
+    degenerate: str = ""  # the weakly constrained direction, empty when there is none
+    timings: dict[str, float] = field(default_factory=dict)  # s: grid_s, ndt_s, refine_s
 
     @property
     def ok(self) -> bool:
@@ -79,6 +88,16 @@ class RegistrationResult:
     @property
     def yaw_deg(self) -> float:
         return float(np.degrees(yaw_of(self.T_target_source)))
+
+    @property
+    def hessian_eigenvalues(self) -> np.ndarray:
+        """Eigenvalues (ascending) of the NDT Hessian :attr:`hessian`."""
+        return np.linalg.eigvalsh(self.hessian)
+
+    @property
+    def icp_hessian_eigenvalues(self) -> np.ndarray:
+        """Eigenvalues (ascending) of :attr:`icp_hessian`; empty without ICP."""
+        return np.zeros(0) if self.icp_hessian is None else np.linalg.eigvalsh(self.icp_hessian)
 
     @property
     def ambiguity(self) -> float:
@@ -115,4 +134,10 @@ class RegistrationResult:
             "warnings": list(self.warnings),
             "icp_rms": self.icp_rms,
             "icp_inliers": self.icp_inliers,
+            "overlap_3d": self.overlap_3d,
+            "degenerate": self.degenerate,
+            "hessian_eigenvalues": self.hessian_eigenvalues.tolist(),
+            "icp_hessian": None if self.icp_hessian is None else self.icp_hessian.tolist(),
+            "icp_hessian_eigenvalues": self.icp_hessian_eigenvalues.tolist(),
+            "timings": dict(self.timings),
         }

@@ -37,6 +37,14 @@ def test_register_writes_all_outputs(pair, tmp_path):
     assert data["status"] == "ok" and np.allclose(data["T_target_source"], T, atol=1e-12)
     lines = (out / "report.csv").read_text().splitlines()
     assert lines[0].startswith("target,source,tx,ty,tz,yaw_deg") and len(lines) == 2
+    row = dict(zip(lines[0].split(","), lines[1].split(","), strict=True))
+    assert 0 < float(row["icp_rms"]) < 0.03 and int(row["icp_inliers"]) > 1000
+    assert 0.2 < float(row["overlap_3d"]) <= 1 and row["degenerate"] == "" and row["status"] == "ok"
+    ndt_eig = [float(v) for v in row["hessian_eigenvalues"].split(";")]
+    icp_eig = [float(v) for v in row["icp_hessian_eigenvalues"].split(";")]
+    assert len(ndt_eig) == 3 and len(icp_eig) == 6 and min(ndt_eig) > 0 and min(icp_eig) > 0
+    icp_h = np.array(data["icp_hessian"])
+    np.testing.assert_allclose(icp_eig, np.linalg.eigvalsh(icp_h), rtol=1e-5)
     used = yaml.safe_load((out / "config_used.yaml").read_text())
     assert used["grid"]["cell_sizes"] == [20.0, 10.0, 5.0, 2.0, 1.0]
     assert not list(out.glob("*.tmp*"))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -56,6 +57,11 @@ def test_partial_config_keeps_other_defaults(tmp_path):
         ({"optimizer": {"method": "gauss"}}, "optimizer.method"),
         ({"search": {"yaw_starts": 0}}, "search.yaw_starts"),
         ({"grid": 3}, "grid"),
+        ({"input": {"axes": "x,y"}}, "input.axes"),
+        ({"input": {"axes": "x,-x,z"}}, "input.axes"),
+        ({"input": {"axes": 3}}, "input.axes"),
+        ({"input": {"scale": 0}}, "input.scale"),
+        ({"input": {"min_range": 5, "max_range": 2}}, "min_range"),
     ],
 )
 def test_bad_values_name_the_key(tmp_path, data, needle):
@@ -77,3 +83,11 @@ def test_missing_and_invalid_yaml(tmp_path):
     p.write_text("- 1\n- 2\n")
     with pytest.raises(ConfigError, match="mapping"):
         config.load(p)
+
+
+def test_axes_matrix_is_a_signed_permutation():
+    A = config.axes_matrix("z,-x,y")
+    p = A @ [1.0, 2.0, 3.0]  # x sideways, y up, z forward -> forward, left, up
+    assert p.tolist() == [3.0, -1.0, 2.0]
+    assert round(float(np.linalg.det(A))) == -1  # a left-handed frame becomes right-handed
+    assert np.array_equal(config.axes_matrix(" X, y ,+z"), np.eye(3))

@@ -82,3 +82,73 @@ def test_voxel_filter_and_subsample_are_deterministic():
     np.testing.assert_allclose(v, voxel_filter_2d(xy[::-1], 0.5))  # order-independent
     a, b = subsample(v, 100, seed=4), subsample(v, 100, seed=4)
     assert len(a) == 100 and np.array_equal(a, b)
+
+
+@pytest.fixture(scope="module")
+def tilted_scan():
+    """A simulated street scan from a scanner tilted 8 deg in roll and 6 deg in pitch."""
+    from ndt_cli import simulate
+
+    scene = simulate.make_street(seed=3)
+    T = simulate.scanner_pose(0.0, 0.0, 30.0, roll_deg=8.0, pitch_deg=-6.0)
+    return simulate.simulate_scan(scene, T, n_azimuth=720, n_elevation=100), T
+
+
+def test_dominant_up_finds_the_ground_normal_of_a_strongly_tilted_scanner(tilted_scan):
+    from ndt_cli.geometry import dominant_up
+
+    pts, T = tilted_scan
+    up = dominant_up(pts)
+    truth = T[:3, :3].T @ [0.0, 0.0, 1.0]  # world up seen in the scanner frame
+    assert np.degrees(np.arccos(np.clip(up @ truth, -1, 1))) < 0.2
+    assert np.allclose(dominant_up(np.tile([0.0, 0.0, 1.0], (10, 1))), [0, 0, 1])  # too few points
+
+
+def test_prepare_levels_a_strongly_tilted_scan(tilted_scan):
+    from ndt_cli.config import Config
+    from ndt_cli.prepare import prepare
+
+    pts, T = tilted_scan
+    scan = prepare(pts, Config())
+    # the levelled frame differs from the world only by a turn about z
+    R = scan.level @ T[:3, :3].T
+    assert abs(np.degrees(np.arccos(np.clip(R[2, 2], -1, 1)))) < 0.1
+    assert 9.0 < scan.tilt_deg < 11.0  # roll 8 and pitch 6 deg combine to 10 deg
+    # the reduction point lies on the ground (world z = 0)
+    assert abs((T[:3, :3] @ scan.reduction + T[:3, 3])[2]) < 0.03
+
+
+def test_voxel_thinning_does_not_depend_on_chunking():
+    from ndt_cli.geometry import VoxelThinner, voxel_thin
+
+    rng = np.random.default_rng(5)
+    pts = rng.uniform(-30, 30, (20000, 3))
+    whole = voxel_thin(pts, 0.5)
+    thinner = VoxelThinner(0.5)
+    for part in np.array_split(pts, 7):
+        thinner.add(part)
+    np.testing.assert_allclose(thinner.result(), whole, atol=1e-12)
+    # reference: the mean of the points sharing a voxel, voxels in lexicographic order
+    ijk = np.floor(pts / 0.5).astype(int)
+    order = sorted({tuple(v) for v in ijk})
+    first = order[0]
+    np.testing.assert_allclose(whole[0], pts[(ijk == first).all(axis=1)].mean(axis=0))
+    assert len(whole) == len(order)
+
+
+def test_a_streamed_scan_is_prepared_like_one_read_at_once(tilted_scan, tmp_path):
+    from ndt_cli import io
+    from ndt_cli.config import Config
+    from ndt_cli.prepare import load_and_prepare
+
+    pts, _ = tilted_scan
+    path = tmp_path / "scan.las"
+    io.write(path, pts)
+    whole = load_and_prepare(path, Config())
+    streamed = load_and_prepare(path, Config().replace(input={"chunk_points": len(pts) // 5}))
+    assert streamed.n_points == whole.n_points == len(pts)
+    np.testing.assert_array_equal(streamed.reduction, whole.reduction)
+    np.testing.assert_array_equal(streamed.level, whole.level)
+    for a, b in zip(streamed.slices, whole.slices, strict=True):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_allclose(streamed.points3d, whole.points3d, atol=1e-9)

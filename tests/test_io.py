@@ -168,6 +168,18 @@ def test_chunked_las_matches_one_shot_read(
     assert np.abs(got - pts).max() <= 0.005 + 1e-9
 
 
+def test_read_chunks_streams_las_and_drops_unusable_points(tmp_path: Path) -> None:
+    pts = _points(5000, seed=3)
+    pts[[10, 4000]] = 0.0  # "no return" rows
+    path = _las(tmp_path / "c.las", pts)
+    assert ndt_io.count(path) == 5000 and ndt_io.count(_written(tmp_path / "w.ply")) is None
+    chunks = list(ndt_io.read_chunks(path, chunk_size=2000))
+    assert [len(c) for c in chunks] == [1999, 2000, 999]
+    np.testing.assert_array_equal(np.concatenate(chunks), ndt_io.read(path).points)
+    whole = list(ndt_io.read_chunks(_written(tmp_path / "w.xyz"), chunk_size=10))
+    assert len(whole) == 1 and len(whole[0]) == 2000  # formats without streaming: one chunk
+
+
 def test_read_uses_module_chunk_size(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, las_chunks: list[tuple[int, int]]
 ) -> None:
@@ -354,12 +366,16 @@ def _no_vertex_ply(path: Path) -> Path:
     return path
 
 
+@pytest.mark.parametrize("streamed", [False, True], ids=["read", "read_chunks"])
 @pytest.mark.parametrize("case", list(BAD))
-def test_bad_input_raises_one_line_input_error(tmp_path: Path, case: str) -> None:
+def test_bad_input_raises_one_line_input_error(tmp_path: Path, case: str, streamed: bool) -> None:
     name, make, fragment = BAD[case]
     path = make(tmp_path / name)
     with pytest.raises(InputError) as info:
-        ndt_io.read(path)
+        if streamed:
+            list(ndt_io.read_chunks(path, chunk_size=500))
+        else:
+            ndt_io.read(path)
     message = str(info.value)
     assert path.name in message
     assert "\n" not in message and len(message) < 400
@@ -406,7 +422,7 @@ def test_write_rejects_unknown_extension_and_bad_shape(tmp_path: Path) -> None:
 
 def test_readers_and_suffixes() -> None:
     assert all(isinstance(r, ndt_io.PointReader) for r in ndt_io.READERS)
-    assert set(ndt_io.SUPPORTED_SUFFIXES) == {*ALL_SUFFIXES, ".e57"}  # E57 is read-only here
+    assert set(ndt_io.SUPPORTED_SUFFIXES) == {*ALL_SUFFIXES, ".e57", ".3d"}  # read-only here
     assert set(ndt_io.WRITE_SUFFIXES) == set(ALL_SUFFIXES)
 
 
@@ -460,3 +476,21 @@ def test_e57_scans_are_read_by_number_and_header_poses_reported(tmp_path: Path) 
     bad.write_bytes(b"not an e57 file at all" * 10)
     with pytest.raises(InputError, match=r"bad\.e57"):
         ndt_io.read(bad)
+
+
+def test_points_are_brought_into_the_configured_scanner_frame(tmp_path):
+    from ndt_cli.config import InputConfig
+    from ndt_cli.prepare import load_points
+
+    # centimetres, x sideways, y up, z forward (a left-handed frame, as 3DTK writes)
+    cm = np.array([[100.0, 50.0, 200.0], [0.0, -160.0, 100.0], [3000.0, 0.0, 3000.0]])
+    f = tmp_path / "scan.3d"
+    f.write_text("".join(f"{x} {y} {z}\n" for x, y, z in cm))
+    inp = InputConfig(scale=0.01, axes="z,-x,y", max_range=32.0)
+    pts, path = load_points(f, inp)
+    assert path == f
+    np.testing.assert_allclose(pts, [[2.0, -1.0, 0.5], [1.0, 0.0, -1.6]])  # the 42 m point dropped
+    near, _ = load_points(cm, InputConfig(scale=0.01, min_range=2.0))
+    assert len(near) == 2  # the point 1.9 m from the scanner is dropped
+    with pytest.raises(InputError, match="min_range"):
+        load_points(f, InputConfig(min_range=1e6))

@@ -130,7 +130,7 @@ def test_a_line_of_points_is_degenerate_not_good(scans, tmp_path):
     res = runner.invoke(
         register_app, [str(target), str(line), "-c", str(cfg), "-o", str(tmp_path / "o"), "-q"]
     )
-    assert res.exit_code == 1 and "suspect" in res.stderr, res.stderr
+    assert res.exit_code == 1 and "degenerate" in res.stderr, res.stderr
 
 
 def test_nan_rows_are_dropped_and_the_rest_registers(scans, tmp_path):

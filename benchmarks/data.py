@@ -1,0 +1,72 @@
+"""Benchmark data, made once and cached in ``benchmarks/.cache``: simulated street scans at full
+terrestrial density (~2 M points each, LAS) and large files tiled from them for the scaling
+curve. The cache key includes the simulator's source, so a changed simulator remakes the data.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import laspy
+import numpy as np
+
+from ndt_cli import io, simulate
+from ndt_cli.transforms import format_matrix
+
+ROOT = Path(__file__).resolve().parents[1]
+CACHE = ROOT / "benchmarks" / ".cache"
+N_SCANS = 6
+SEED = 7
+RAYS = {"n_azimuth": 4500, "n_elevation": 640}  # ~2 M points per scan
+
+
+def _key() -> str:
+    text = (ROOT / "ndt_cli" / "simulate.py").read_bytes()
+    return hashlib.sha256(text + repr((N_SCANS, SEED, RAYS)).encode()).hexdigest()[:12]
+
+
+def street() -> tuple[list[Path], Path]:
+    """Six ~2 M-point LAS scans of one street and their ``T_world_scan`` poses file."""
+    folder = CACHE / f"street_{_key()}"
+    files = [folder / f"scan_{k:02d}.las" for k in range(N_SCANS)]
+    poses_file = folder / "poses_T_world_scan.txt"
+    if poses_file.exists() and all(f.exists() for f in files):
+        return files, poses_file
+    folder.mkdir(parents=True, exist_ok=True)
+    print(f"making {N_SCANS} full-density scans in {folder} (once) ...", flush=True)
+    _, scans, poses = simulate.make_sequence(seed=SEED, n_scans=N_SCANS, scan_kwargs=RAYS)
+    for f, pts in zip(files, scans, strict=True):
+        io.write(f, pts)
+    lines = [
+        f"{f.name} {format_matrix(T).replace(chr(10), ' ')}"
+        for f, T in zip(files, poses, strict=True)
+    ]
+    poses_file.write_text("\n".join(lines) + "\n")
+    return files, poses_file
+
+
+def tiled(base: Path, n_points: int) -> Path:
+    """A LAS file of ``n_points`` points: copies of ``base`` turned about z by different angles
+    (a denser scan of the same kind of scene), written chunk by chunk."""
+    out = base.parent / f"tiled_{n_points // 1_000_000}M_{n_points % 1_000_000}.las"
+    if out.exists():
+        return out
+    pts = io.read(base).points
+    header = laspy.LasHeader(point_format=0, version="1.2")
+    header.scales = np.full(3, io.LAS_SCALE)
+    header.offsets = np.zeros(3)
+    tmp = out.with_suffix(".tmp")
+    written, k = 0, 0
+    with laspy.open(tmp, mode="w", header=header) as writer:
+        while written < n_points:
+            a = np.radians(137.5 * k)  # golden-angle turns: no two copies coincide
+            R = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0, 0, 1]])
+            part = pts[: n_points - written] @ R.T
+            record = laspy.ScaleAwarePointRecord.zeros(len(part), header=header)
+            record.x, record.y, record.z = part[:, 0], part[:, 1], part[:, 2]
+            writer.write_points(record)
+            written += len(part)
+            k += 1
+    tmp.rename(out)
+    return out

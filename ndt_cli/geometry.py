@@ -1,0 +1,97 @@
+"""Small geometric building blocks on 3D points (metres, any frame): voxel thinning, normals and
+the dominant "up" direction of a scan."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+_OFFSET = 1 << 20  # voxel indices are packed as 21-bit fields: +-1e6 voxels from the origin
+
+
+class VoxelThinner:
+    """One point (the centroid) per ``voxel`` metre cube, accumulated over chunks of points.
+
+    The result is ordered by voxel (x index, then y, then z), whatever the chunking. Coordinates
+    must lie within 2**20 voxels of the origin (a reduced frame; 105 km at 0.1 m).
+    """
+
+    def __init__(self, voxel: float) -> None:
+        self.voxel = voxel
+        self._parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+
+    def add(self, points: np.ndarray) -> None:
+        if len(points) == 0:
+            return
+        ijk = np.floor(points / self.voxel).astype(np.int64) + _OFFSET
+        if ijk.min() < 0 or ijk.max() >= 2 * _OFFSET:
+            raise ValueError("points too far from the origin for voxel thinning")
+        keys = (ijk[:, 0] << 42) | (ijk[:, 1] << 21) | ijk[:, 2]
+        self._parts.append(_grouped(keys, points, np.ones(len(points))))
+
+    def result(self) -> np.ndarray:
+        """(n,3) float64 centroids, one per occupied voxel."""
+        if not self._parts:
+            return np.empty((0, 3))
+        if len(self._parts) == 1:
+            _, sums, counts = self._parts[0]
+        else:
+            keys, sums, counts = (np.concatenate(x) for x in zip(*self._parts, strict=True))
+            _, sums, counts = _grouped(keys, sums, counts)
+        return sums / counts[:, None]
+
+
+def _grouped(
+    keys: np.ndarray, values: np.ndarray, weights: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unique keys (sorted), the per-key sums of the (n,3) ``values`` and of ``weights``."""
+    uniq, inverse = np.unique(keys, return_inverse=True)
+    sums = np.column_stack([np.bincount(inverse, weights=values[:, k]) for k in range(3)])
+    return uniq, sums, np.bincount(inverse, weights=weights)
+
+
+def voxel_thin(points: np.ndarray, voxel: float) -> np.ndarray:
+    """One point (the centroid) per ``voxel`` metre cube (see :class:`VoxelThinner`)."""
+    thinner = VoxelThinner(voxel)
+    thinner.add(points)
+    return thinner.result()
+
+
+def normals(points: np.ndarray, tree: cKDTree, k: int = 12) -> tuple[np.ndarray, np.ndarray]:
+    """Unit normals from the covariance of each point's ``k`` neighbours, and a planarity in
+    [0, 1] (1 - smallest/middle eigenvalue) to drop points without a clear plane."""
+    _, idx = tree.query(points, k=k)
+    nb = np.asarray(tree.data)[idx]
+    d = nb - nb.mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", d, d) / k
+    w, V = np.linalg.eigh(cov)
+    return V[:, :, 0], 1.0 - w[:, 0] / np.maximum(w[:, 1], 1e-12)
+
+
+def dominant_up(
+    points: np.ndarray, voxel: float = 0.25, max_tilt_deg: float = 25.0, sample: int = 20_000
+) -> np.ndarray:
+    """Unit normal (frame of ``points``) shared by most of the roughly horizontal surfaces.
+
+    Ground, floors, ceilings and flat roofs are level in a built scene, so this is the up
+    direction of a tilted scanner. Normals from local PCA of voxel-thinned points; those within
+    ``max_tilt_deg`` of +z are averaged inside a cone that narrows from 10 to 2.5 degrees around
+    the current estimate. Returns +z when there are too few planar, roughly horizontal points.
+    """
+    up = np.array([0.0, 0.0, 1.0])
+    thin = voxel_thin(points, voxel)
+    if len(thin) < 50:
+        return up
+    tree = cKDTree(thin)
+    n, planarity = normals(thin[:: max(1, len(thin) // sample)], tree, k=min(10, len(thin)))
+    n = n * np.where(n[:, 2] < 0, -1.0, 1.0)[:, None]
+    n = n[(planarity > 0.7) & (n[:, 2] > np.cos(np.radians(max_tilt_deg)))]
+    if len(n) < 20:
+        return up
+    u = np.median(n, axis=0)
+    for cone in (10.0, 5.0, 2.5):
+        near = n[n @ (u / np.linalg.norm(u)) > np.cos(np.radians(cone))]
+        if len(near) < 10:
+            break
+        u = near.mean(axis=0)
+    return u / np.linalg.norm(u)
