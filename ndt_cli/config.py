@@ -31,7 +31,7 @@ class InputConfig:
     axes: str = "x,y,z"  # file axis that becomes x, y, z, with a sign: "z,-x,y" for x-right y-up
     min_range: float = 0.0  # drop points nearer than this to the origin (tripod, vehicle), m
     max_range: float | None = None  # drop points farther than this from the origin, m (None: keep)
-    chunk_points: int = 2_000_000  # LAS/LAZ with more points are streamed in chunks this big
+    chunk_points: int = 4_000_000  # LAS/LAZ with more points are streamed in chunks this big
 
 
 @dataclass(frozen=True)

@@ -110,7 +110,8 @@ def distinct_indices(params: np.ndarray, scores: np.ndarray, k: int, cell: float
 
 
 def _offsets(cell: float, enabled: bool) -> np.ndarray:
-    """Restart offsets of a finer level: a 5 x 5 grid of +-1 and +-1/2 cells in x and y."""
+    """Restart offsets of a finer level: a 5 x 5 grid of +-1 and +-1/2 cells in x and y. (Only
+    +-1/2 cell saves a quarter of the time, but let a link of two scans 30 m apart slide 4.6 m.)"""
     if not enabled:
         return np.zeros((1, 3))
     steps = cell * np.array([0.0, -0.5, 0.5, -1.0, 1.0])
@@ -147,7 +148,7 @@ def _refine(
     if target.points3d is None or source.points3d is None:
         return T, None, ""
     T_red = translation(-target.reduction) @ T @ translation(source.reduction)
-    res = icp(target.points3d, source.points3d, T_red, voxel=r.voxel,
+    res = icp(target.points3d, source.points3d, T_red, voxel=None,
               max_distance=r.max_distance, min_distance=r.min_distance, huber=r.huber,
               iterations=r.iterations,
               overlap_distance=cfg.quality.overlap_distance)  # fmt: skip
@@ -162,8 +163,9 @@ def _pairs(ndt: NDTMap, src: SourcePoints) -> int:
     return int(np.diff(ndt.slice_grids)[src.slice_id].sum())
 
 
-def _evaluator(ndt: NDTMap, src: SourcePoints) -> Callable[[np.ndarray], np.ndarray]:
-    return lambda P: evaluate(ndt, src, P)
+def _evaluator(ndt: NDTMap, src: SourcePoints, cfg: Config) -> Callable[[np.ndarray], np.ndarray]:
+    lm = cfg.optimizer.method != "newton"  # Newton needs no Levenberg-Marquardt terms
+    return lambda P: evaluate(ndt, src, P, lm)
 
 
 def register_prepared(
@@ -185,7 +187,7 @@ def register_prepared(
             source, cfg, min(cfg.search.points_per_slice, cfg.source.points_per_slice)
         )
         starts = search_starts(target, source, cfg)
-        res = optimize(_evaluator(maps(cells[0]), coarse), starts, cfg.optimizer, cells[0])
+        res = optimize(_evaluator(maps(cells[0]), coarse, cfg), starts, cfg.optimizer, cells[0])
         cands = res.params[
             distinct_indices(res.params, res.score, cfg.search.keep_candidates, cells[0])
         ]
@@ -214,7 +216,7 @@ def register_prepared(
         t0 = time.perf_counter()
         off = _offsets(cell, cfg.search.refine_offsets)
         starts = (cands[:, None, :] + off[None, :, :]).reshape(-1, 3)
-        res = optimize(_evaluator(maps(cell), fine), starts, cfg.optimizer, cell)
+        res = optimize(_evaluator(maps(cell), fine, cfg), starts, cfg.optimizer, cell)
         per = res.score.reshape(len(cands), len(off))
         pick = np.argmax(per, axis=1)
         flat = np.arange(len(cands)) * len(off) + pick

@@ -28,17 +28,21 @@ class VoxelThinner:
             raise ValueError("points too far from the origin for voxel thinning")
         keys = (ijk[:, 0] << 42) | (ijk[:, 1] << 21) | ijk[:, 2]
         self._parts.append(_grouped(keys, points, np.ones(len(points))))
+        if len(self._parts) >= 4:  # memory grows with the voxels, not with the chunks
+            self._parts = [self._merged()]
 
     def result(self) -> np.ndarray:
         """(n,3) float64 centroids, one per occupied voxel."""
         if not self._parts:
             return np.empty((0, 3))
-        if len(self._parts) == 1:
-            _, sums, counts = self._parts[0]
-        else:
-            keys, sums, counts = (np.concatenate(x) for x in zip(*self._parts, strict=True))
-            _, sums, counts = _grouped(keys, sums, counts)
+        _, sums, counts = self._merged()
         return sums / counts[:, None]
+
+    def _merged(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if len(self._parts) == 1:
+            return self._parts[0]
+        keys, sums, counts = (np.concatenate(x) for x in zip(*self._parts, strict=True))
+        return _grouped(keys, sums, counts)
 
 
 def _grouped(
@@ -60,7 +64,7 @@ def voxel_thin(points: np.ndarray, voxel: float) -> np.ndarray:
 def normals(points: np.ndarray, tree: cKDTree, k: int = 12) -> tuple[np.ndarray, np.ndarray]:
     """Unit normals from the covariance of each point's ``k`` neighbours, and a planarity in
     [0, 1] (1 - smallest/middle eigenvalue) to drop points without a clear plane."""
-    _, idx = tree.query(points, k=k)
+    _, idx = tree.query(points, k=k, workers=-1)
     nb = np.asarray(tree.data)[idx]
     d = nb - nb.mean(axis=1, keepdims=True)
     cov = np.einsum("nki,nkj->nij", d, d) / k

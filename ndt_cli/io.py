@@ -297,6 +297,12 @@ def _file_errors(p: Path) -> Iterator[None]:
         raise InputError(f"not a valid or complete {p.suffix} file: {_one_line(exc)}", p) from exc
 
 
+def _usable(raw: np.ndarray) -> np.ndarray:
+    """Rows that are finite and not exactly (0,0,0) (column-wise: fast on (N,3) arrays)."""
+    finite = np.isfinite(raw[:, 0] + raw[:, 1] + raw[:, 2])
+    return finite & ~((raw[:, 0] == 0.0) & (raw[:, 1] == 0.0) & (raw[:, 2] == 0.0))
+
+
 def count(path: str | Path) -> int | None:
     """Points a file announces in its header (LAS/LAZ), or None for formats without a count."""
     p, reader = _open(path)
@@ -319,7 +325,7 @@ def read_chunks(path: str | Path, chunk_size: int | None = None) -> Iterator[np.
             else iter([np.asarray(reader.read_xyz(p), dtype=np.float64).reshape(-1, 3)])
         )
         for raw in raws:
-            keep = np.isfinite(raw).all(axis=1) & ~(raw == 0.0).all(axis=1)
+            keep = _usable(raw)
             n_read += len(raw)
             n_kept += int(keep.sum())
             if keep.any():
@@ -341,8 +347,8 @@ def read(path: str | Path) -> PointCloud:
     n_read = len(raw)
     if n_read == 0:
         raise InputError("no points in file", p)
-    finite = np.isfinite(raw).all(axis=1)
-    zero = (raw == 0.0).all(axis=1)
+    finite = np.isfinite(raw[:, 0] + raw[:, 1] + raw[:, 2])  # NaN or inf anywhere: not finite
+    zero = (raw[:, 0] == 0.0) & (raw[:, 1] == 0.0) & (raw[:, 2] == 0.0)
     keep = finite & ~zero
     n_nonfinite, n_zero = int(n_read - finite.sum()), int(zero.sum())
     logger.log(

@@ -91,6 +91,7 @@ def _accumulate(
     icov,
     cell_size,
     chunk,
+    lm,
     out,
 ):  # pragma: no cover - compiled
     n_starts = params.shape[0]
@@ -137,7 +138,8 @@ def _accumulate(
             for g in range(slice_grids[k], slice_grids[k + 1]):
                 ci = _find_cell(xp, yp, g, origin, shape, offset, cell_index, inv_cell)
                 if ci < 0:
-                    err += 0.5
+                    if lm:
+                        err += 0.5
                     continue
                 dx = xp - means[ci, 0]
                 dy = yp - means[ci, 1]
@@ -160,6 +162,9 @@ def _accumulate(
                 h11 += e * (cc - u1 * u1)
                 h12 += e * (ajy - u1 * u2)
                 h22 += e * (jx * ajx + jy * ajy - u0 * jy + u1 * jx - u2 * u2)
+                matched += 1.0
+                if not lm:  # Newton needs score, gradient and Hessian only
+                    continue
                 e2 = e * e
                 j00 += e2 * u0 * u0
                 j01 += e2 * u0 * u1
@@ -172,7 +177,6 @@ def _accumulate(
                 r1 += w * u1
                 r2 += w * u2
                 err += 0.5 * (1.0 - e) * (1.0 - e)
-                matched += 1.0
         o = out[st, c]
         o[0] = score
         o[1] = g0
@@ -262,13 +266,14 @@ def _map_args(m: NDTMap) -> tuple:
     )
 
 
-def evaluate(ndt_map: NDTMap, src: SourcePoints, params: np.ndarray) -> np.ndarray:
-    """Accumulators (S, NACC) for the S poses in ``params`` (S,3): see the module docstring."""
+def evaluate(ndt_map: NDTMap, src: SourcePoints, params: np.ndarray, lm: bool = True) -> np.ndarray:
+    """Accumulators (S, NACC) for the S poses in ``params`` (S,3): see the module docstring.
+    ``lm=False`` leaves the Levenberg-Marquardt columns (JTJ, JTR, ERR) at zero and is faster."""
     params = np.ascontiguousarray(np.atleast_2d(params), dtype=np.float64)
     n_chunks = max(1, -(-len(src) // CHUNK))
     out = np.zeros((params.shape[0], n_chunks, NACC))
     if len(src) and params.shape[0]:
-        _accumulate(params, src.xy, src.slice_id, *_map_args(ndt_map), CHUNK, out)
+        _accumulate(params, src.xy, src.slice_id, *_map_args(ndt_map), CHUNK, lm, out)
     return out.sum(axis=1)
 
 

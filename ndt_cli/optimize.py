@@ -31,6 +31,8 @@ from ndt_cli.kernels import ERR, GRAD, HESS, JTJ, JTR, SCORE, sym3
 Evaluator = Callable[[np.ndarray], np.ndarray]
 _STILL_M = 1e-3  # a best pose that moved less than this (m) ...
 _STILL_RAD = 1e-5  # ... and this (rad) over the last ``patience`` iterations has converged
+_STEP_M = 1e-4  # a start whose step is below this (m) ...
+_STEP_RAD = 1e-6  # ... and this (rad) has converged
 _REL_IMPROVEMENT = 1e-6  # a score must rise by this fraction to count as improved (sub-mm)
 
 
@@ -79,6 +81,11 @@ def _mean_diag(acc: np.ndarray) -> np.ndarray:
     return sym3(acc[:, JTJ])[:, np.arange(3), np.arange(3)].mean(axis=1)
 
 
+def _still(moved: np.ndarray, tol_m: float, tol_rad: float) -> np.ndarray:
+    """Per pose change (S,3): below ``tol_m`` in translation and ``tol_rad`` in yaw?"""
+    return (np.hypot(moved[:, 0], moved[:, 1]) < tol_m) & (np.abs(moved[:, 2]) < tol_rad)
+
+
 def optimize(
     evaluate: Evaluator, p0: np.ndarray, cfg: OptimizerConfig, cell_size: float
 ) -> BatchResult:
@@ -91,6 +98,7 @@ def optimize(
     best = acc[:, SCORE].copy()
     iters = np.zeros(n, dtype=np.int64)
     stall = np.zeros(n, dtype=np.int64)
+    tiny = np.zeros(n, dtype=bool)
     active = np.ones(n, dtype=bool)
     alpha = np.ones(n)
     lam = (cfg.lm_lambda if cfg.method == "lm_fixed" else 1e-2) * _mean_diag(acc)
@@ -106,7 +114,8 @@ def optimize(
             steps = _newton_steps(a) * alpha[idx, None]
         else:
             steps = _lm_steps(a, lam[idx])
-        prop = p[idx] + _cap(steps, max_t, max_r)
+        a_p = p[idx].copy()
+        prop = a_p + _cap(steps, max_t, max_r)
         new = evaluate(prop)
         evaluations += len(idx)
         iters[idx] += 1
@@ -125,10 +134,13 @@ def optimize(
         best_p[idx[improved]] = prop[improved]
         stall[idx] = np.where(improved, 0, stall[idx] + 1)
         active[idx] = (stall[idx] < cfg.patience) & (iters[idx] < cfg.max_iterations)
+        history.append(best_p.copy())
+        # a step that moves the pose by less than 0.1 mm / 1e-6 rad changes nothing more
+        tiny[idx] = _still(prop - a_p, _STEP_M, _STEP_RAD)
+        active[idx] &= ~tiny[idx]
         row = np.full(n, np.nan)
         row[idx] = best[idx]
         trace.append(row)
-        history.append(best_p.copy())
         state = np.full((n, 4), np.nan)
         state[idx, :3] = p[idx]
         state[idx, 3] = acc[idx, SCORE]
@@ -136,10 +148,9 @@ def optimize(
     # converged: the score stopped improving, or the best pose stopped moving (creeping gains
     # of cell-boundary effects can keep the score rising by tiny amounts until max_iterations)
     converged = stall >= cfg.patience
+    converged |= tiny  # stopped by a vanishing step
     if len(history) > cfg.patience:
-        moved = np.abs(history[-1] - history[-1 - cfg.patience])
-        still = (np.hypot(moved[:, 0], moved[:, 1]) < _STILL_M) & (moved[:, 2] < _STILL_RAD)
-        converged |= still
+        converged |= _still(history[-1] - history[-1 - cfg.patience], _STILL_M, _STILL_RAD)
     return BatchResult(
         params=best_p,
         score=best,

@@ -56,7 +56,7 @@ def icp(
     source: np.ndarray,
     T0: np.ndarray,
     *,
-    voxel: float = 0.1,
+    voxel: float | None = 0.1,
     max_distance: float = 1.0,
     min_distance: float = 0.1,
     iterations: int = 40,
@@ -64,12 +64,14 @@ def icp(
     max_source_points: int = 20_000,
     overlap_distance: float = 0.2,
 ) -> IcpResult:
-    """Refine ``T0`` (source -> target) by robust point-to-plane ICP."""
-    tgt = voxel_thin(target, voxel)
-    src = voxel_thin(source, voxel)
+    """Refine ``T0`` (source -> target) by robust point-to-plane ICP. ``voxel=None``: the
+    points are thinned already. Target normals are computed for the points ICP reaches only."""
+    tgt = target if voxel is None else voxel_thin(target, voxel)
+    src = source if voxel is None else voxel_thin(source, voxel)
     src = src[:: max(1, len(src) // max_source_points)]  # a regular stride: deterministic
     tree = cKDTree(tgt)
-    n, planarity = normals(tgt, tree)
+    n = np.zeros((len(tgt), 3))
+    planarity = np.full(len(tgt), np.nan)  # NaN: not computed yet
     T = np.array(T0, dtype=float)
     dist = max_distance
     it = 0
@@ -78,8 +80,11 @@ def icp(
     pi = ni = w = np.zeros((0, 3))
     for it in range(1, iterations + 1):  # noqa: B007
         p = src @ T[:3, :3].T + T[:3, 3]
-        d, j = tree.query(p, distance_upper_bound=dist)
+        d, j = tree.query(p, distance_upper_bound=dist, workers=-1)
         ok = np.isfinite(d)
+        need = np.unique(j[ok][np.isnan(planarity[j[ok]])])
+        if len(need):
+            n[need], planarity[need] = normals(tgt[need], tree)
         ok[ok] &= planarity[j[ok]] > _MIN_PLANARITY
         if ok.sum() < 6:
             break
@@ -105,5 +110,7 @@ def icp(
     if len(pi):  # the curvature about the matched points' centroid: independent of the frame
         J = np.column_stack([np.cross(pi - pi.mean(axis=0), ni), ni])
         H = (J * w[:, None]).T @ J
-    d, _ = tree.query(src @ T[:3, :3].T + T[:3, 3], distance_upper_bound=overlap_distance)
+    d, _ = tree.query(
+        src @ T[:3, :3].T + T[:3, 3], distance_upper_bound=overlap_distance, workers=-1
+    )
     return IcpResult(T, rms, inliers, it, H, float(np.isfinite(d).mean()))

@@ -3,6 +3,7 @@ work, wrong results are never reported as good, and results are bit-identical ru
 
 from __future__ import annotations
 
+import csv
 import json
 import os
 import signal
@@ -166,7 +167,7 @@ def test_two_different_streets_are_never_reported_as_good(scans, tmp_path):
     res = runner.invoke(register_app, [str(a), str(b), "-o", str(tmp_path / "o"), "--json"])
     assert res.exit_code == 1
     data = json.loads(res.stdout)
-    assert data["status"] == "suspect" and data["warnings"]
+    assert data["status"] in ("suspect", "degenerate") and data["warnings"]
 
 
 def test_crashed_worker_fails_its_link_and_the_chain_completes(scans, tmp_path, monkeypatch):
@@ -240,7 +241,7 @@ def test_sigkill_at_several_points_then_resume_equals_clean_run(scans, tmp_path,
 
 
 def _without_runtime(path: Path) -> list[list[str]]:
-    rows = [line.split(",") for line in path.read_text().splitlines()]
+    rows = list(csv.reader(path.read_text().splitlines()))
     drop = rows[0].index("runtime_s")
     return [row[:drop] + row[drop + 1 :] for row in rows]
 
