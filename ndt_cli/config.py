@@ -306,8 +306,8 @@ def _validate(c: Config) -> None:
     if c.ground.z is not None and not -1e7 < c.ground.z < 1e7:
         raise ConfigError(f"'ground.z' is implausible: {c.ground.z}")
     positive("ground.bin_size", c.ground.bin_size)
-    if not c.slices.heights:
-        raise ConfigError("'slices.heights' must list at least one height")
+    if not 1 <= len(c.slices.heights) <= 63:
+        raise ConfigError("'slices.heights' must list between 1 and 63 heights")
     positive("slices.thickness", c.slices.thickness)
     cells = c.grid.cell_sizes
     if not cells:

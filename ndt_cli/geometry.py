@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-_OFFSET = 1 << 20  # voxel indices are packed as 21-bit fields: +-1e6 voxels from the origin
+VOXEL_OFFSET = 1 << 20  # voxel indices are packed as 21-bit fields: +-1e6 voxels from origin
 
 
 class VoxelThinner:
@@ -23,11 +23,16 @@ class VoxelThinner:
     def add(self, points: np.ndarray) -> None:
         if len(points) == 0:
             return
-        ijk = np.floor(points / self.voxel).astype(np.int64) + _OFFSET
-        if ijk.min() < 0 or ijk.max() >= 2 * _OFFSET:
+        ijk = np.floor(points / self.voxel).astype(np.int64) + VOXEL_OFFSET
+        if ijk.min() < 0 or ijk.max() >= 2 * VOXEL_OFFSET:
             raise ValueError("points too far from the origin for voxel thinning")
         keys = (ijk[:, 0] << 42) | (ijk[:, 1] << 21) | ijk[:, 2]
-        self._parts.append(_grouped(keys, points, np.ones(len(points))))
+        self.add_grouped(keys, points, np.ones(len(points)))
+
+    def add_grouped(self, keys: np.ndarray, sums: np.ndarray, counts: np.ndarray) -> None:
+        """Add rows already grouped by voxel key (packed as in :meth:`add`): coordinate sums
+        (n,3) and point counts; a key may repeat."""
+        self._parts.append(_grouped(keys, sums, counts))
         if len(self._parts) >= 4:  # memory grows with the voxels, not with the chunks
             self._parts = [self._merged()]
 

@@ -18,7 +18,8 @@ import numpy as np
 from ndt_cli.config import Config, InputConfig, axes_matrix
 from ndt_cli.errors import InputError
 from ndt_cli.geometry import VoxelThinner, dominant_up
-from ndt_cli.slicing import cut_slices, estimate_ground, fit_ground_plane
+from ndt_cli.passes import bounds, slice_pass
+from ndt_cli.slicing import estimate_ground, fit_ground_plane
 from ndt_cli.transforms import levelling_rotation, rotation4, rotation_angle_deg, translation
 
 log = logging.getLogger(__name__)
@@ -163,7 +164,8 @@ def _first_pass(scan: ScanChunks, cfg: Config) -> tuple[np.ndarray, np.ndarray, 
     for c in scan.chunks():
         if len(c) == 0:
             continue
-        lo, hi = np.minimum(lo, c.min(axis=0)), np.maximum(hi, c.max(axis=0))
+        c_lo, c_hi = bounds(c)
+        lo, hi = np.minimum(lo, c_lo), np.maximum(hi, c_hi)
         parts.append(c[(-seen) % stride :: stride])
         seen += len(c)
     if seen == 0:
@@ -201,12 +203,16 @@ def prepare_chunks(scan: ScanChunks, cfg: Config) -> PreparedScan:
     heights = cfg.slices.heights
     parts: list[list[np.ndarray]] = [[] for _ in heights]
     thinner = VoxelThinner(cfg.refine.voxel) if cfg.refine.method == "icp" else None
+    voxel = cfg.refine.voxel if thinner is not None else 0.0
     for c in scan.chunks():
-        rel = c - reduction
-        for k, part in enumerate(cut_slices(rel @ level.T, 0.0, heights, cfg.slices.thickness)):
+        try:
+            cut, grouped = slice_pass(c, reduction, level, heights, cfg.slices.thickness, voxel)
+        except ValueError as exc:
+            raise InputError(f"{exc} (scan spans more than 100 km?)", path) from None
+        for k, part in enumerate(cut):
             parts[k].append(part)
-        if thinner is not None:
-            thinner.add(rel)
+        if thinner is not None and grouped is not None:
+            thinner.add_grouped(*grouped)
     slices = [np.concatenate(p) if len(p) != 1 else p[0] for p in parts]
     n_slice = sum(len(s) for s in slices)
     if n_slice < cfg.grid.min_points:

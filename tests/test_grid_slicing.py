@@ -152,3 +152,30 @@ def test_a_streamed_scan_is_prepared_like_one_read_at_once(tilted_scan, tmp_path
     for a, b in zip(streamed.slices, whole.slices, strict=True):
         np.testing.assert_array_equal(a, b)
     np.testing.assert_allclose(streamed.points3d, whole.points3d, atol=1e-9)
+
+
+def test_slice_pass_matches_its_numpy_twin_with_overlapping_slices():
+    from ndt_cli.geometry import VoxelThinner
+    from ndt_cli.passes import bounds, slice_pass, slice_pass_numpy
+    from ndt_cli.transforms import levelling_rotation
+
+    rng = np.random.default_rng(8)
+    pts = np.repeat(rng.uniform([-40, -40, -2], [40, 40, 15], (3000, 3)), 3, axis=0)  # runs
+    pts += rng.normal(0, 0.01, pts.shape)
+    reduction, level = np.array([3.0, -2.0, -1.5]), levelling_rotation(0.01, -0.02)
+    heights = [1.0, 1.2, 4.0]  # the first two overlap: a point can be in both
+    fast, grouped = slice_pass(pts, reduction, level, heights, 0.4, 0.1)
+    slow, ref = slice_pass_numpy(pts, reduction, level, heights, 0.4, 0.1)
+    for a, b in zip(fast, slow, strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-12)
+    assert len(np.intersect1d(fast[0][:, 0], fast[1][:, 0])) > 0
+    assert len(grouped[0]) < len(pts)  # consecutive points in one voxel share a row
+    t_fast, t_slow = VoxelThinner(0.1), VoxelThinner(0.1)
+    t_fast.add_grouped(*grouped)
+    t_slow.add_grouped(*ref)
+    np.testing.assert_allclose(t_fast.result(), t_slow.result(), atol=1e-9)
+    lo, hi = bounds(pts)
+    np.testing.assert_array_equal(lo, pts.min(axis=0))
+    np.testing.assert_array_equal(hi, pts.max(axis=0))
+    none, nothing = slice_pass(pts, reduction, level, heights, 0.4, 0.0)
+    assert nothing is None and all(np.array_equal(a, b) for a, b in zip(none, fast, strict=True))
