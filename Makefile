@@ -22,8 +22,13 @@ demo: $(STAMP)
 test: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q
 
-bench: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python benchmarks/run.py
+$(VENV)/.bench: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[dev,bench]" || \
+		echo "peers (open3d, small_gicp) not installed: the benchmark says so in their rows"
+	@touch $(VENV)/.bench
+
+bench: $(VENV)/.bench
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python benchmarks/run.py $(BENCH_ARGS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check ndt_cli tests tools benchmarks

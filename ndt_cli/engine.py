@@ -30,6 +30,7 @@ from ndt_cli.transforms import pose2d_matrix, transform_errors, translation, wra
 
 _MIN_SEPARATION_DEG = 10.0  # candidates closer than this in yaw and half a cell apart are one
 _EVIDENCE_LEVELS = 3  # finest levels whose fit-weighted scores decide between candidates
+_VOXEL_PER_CELL = 0.1  # source points of a level are thinned to a tenth of its cell
 
 
 class TargetMaps:
@@ -62,6 +63,22 @@ def source_points(scan: PreparedScan, cfg: Config, cap: int) -> SourcePoints:
     return SourcePoints.from_slices(
         [
             subsample(voxel_filter_2d(s, cfg.source.voxel), cap, seed=k)
+            for k, s in enumerate(scan.slices)
+        ]
+    )
+
+
+def _level_points(
+    scan: PreparedScan, cfg: Config, cell: float, fine: SourcePoints, cap: int | None = None
+) -> SourcePoints:
+    """Source points of a level: voxel-filtered at a tenth of the cell (at least source.voxel),
+    at most ``cap`` per slice (default source.points_per_slice)."""
+    voxel = max(cfg.source.voxel, cell * _VOXEL_PER_CELL)
+    if voxel == cfg.source.voxel and cap is None:
+        return fine
+    return SourcePoints.from_slices(
+        [
+            subsample(voxel_filter_2d(s, voxel), cap or cfg.source.points_per_slice, seed=k)
             for k, s in enumerate(scan.slices)
         ]
     )
@@ -183,8 +200,12 @@ def register_prepared(
 
     if init is None:
         t0 = time.perf_counter()
-        coarse = source_points(
-            source, cfg, min(cfg.search.points_per_slice, cfg.source.points_per_slice)
+        coarse = _level_points(
+            source,
+            cfg,
+            cells[0],
+            fine,
+            min(cfg.search.points_per_slice, cfg.source.points_per_slice),
         )
         starts = search_starts(target, source, cfg)
         res = optimize(_evaluator(maps(cells[0]), coarse, cfg), starts, cfg.optimizer, cells[0])
@@ -216,14 +237,15 @@ def register_prepared(
         t0 = time.perf_counter()
         off = _offsets(cell, cfg.search.refine_offsets)
         starts = (cands[:, None, :] + off[None, :, :]).reshape(-1, 3)
-        res = optimize(_evaluator(maps(cell), fine, cfg), starts, cfg.optimizer, cell)
+        pts = _level_points(source, cfg, cell, fine)
+        res = optimize(_evaluator(maps(cell), pts, cfg), starts, cfg.optimizer, cell)
         per = res.score.reshape(len(cands), len(off))
         pick = np.argmax(per, axis=1)
         flat = np.arange(len(cands)) * len(off) + pick
         cands = res.params[flat]
         scores = res.score[flat]
         if k >= len(schedule) - _EVIDENCE_LEVELS:
-            evidence += _fit_weighted(evaluate(maps(cell), fine, cands))
+            evidence += _fit_weighted(evaluate(maps(cell), pts, cands))
         w = flat[int(np.argmax(scores))]
         converged = bool(res.converged[w])
         levels.append(
@@ -232,7 +254,7 @@ def register_prepared(
                 len(starts),
                 int(res.iterations[w]),
                 float(res.score[w]),
-                float(res.score[w] / max(len(fine), 1)),
+                float(res.score[w] / max(len(pts), 1)),
                 converged,
                 time.perf_counter() - t0,
             )

@@ -87,7 +87,7 @@ def test_a_worker_killed_mid_run_does_not_stop_the_chain(cluster, files, local_r
     result = run_chain([*files, *files[:2]], cfg, tmp_path / "o", executor="dask",
                        scheduler=cluster.scheduler_address, on_progress=kill_one)  # fmt: skip
     assert killed and len(result.links) == 5
-    assert all(link.status in ("ok", "suspect") for link in result.links)
+    assert all(link.status in ("ok", "suspect", "degenerate") for link in result.links)
     for a, b in zip(result.links[:3], reference.links, strict=True):
         assert np.array_equal(a.T_target_source, b.T_target_source)
 
