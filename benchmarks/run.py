@@ -35,6 +35,7 @@ from ndt_cli.report import write_register_outputs  # noqa: E402
 from ndt_cli.transforms import read_pose_list, transform_errors, yaw_of  # noqa: E402
 
 BIN = Path(sys.executable).parent
+_CYCLES, _CYCLES_LM, _CYCLES_MISS = 50, 70, 10  # estimated cycles per point evaluation
 OUT = data.CACHE / "results"
 
 
@@ -108,18 +109,21 @@ def kernel_throughput(cfg: Config, files: list[Path], gt: np.ndarray, mhz: float
                 t = best_of(lambda c=cell, s=src, p=params, m=lm: evaluate(maps(c), s, p, m))
                 evals = len(params) * len(src)
                 rate = evals / t
+                cycles = mhz * 1e6 * threads / rate  # core cycles per evaluation
+                bound = matched * (_CYCLES_LM if lm else _CYCLES) + (1 - matched) * _CYCLES_MISS
                 rows.append([label, "newton" if not lm else "newton+LM", str(threads),
                              f"{evals / 1e6:.1f} M", f"{matched:.2f}", f"{rate / 1e6:.0f}",
-                             f"{mhz * 1e6 * threads / rate:.0f}"])  # fmt: skip
+                             f"{cycles:.0f}", f"{bound:.0f}", f"{bound / cycles:.0%}"])  # fmt: skip
     numba.set_num_threads(threads_all)
     print("## NDT kernel (score, gradient, Hessian; + LM terms): point evaluations per second\n")
-    table(["case", "terms", "threads", "evals", "in a cell", "M evals/s", "cycles/eval"], rows)
+    table(["case", "terms", "threads", "evals", "in a cell", "M evals/s", "cycles/eval",
+           "bound", "of bound"], rows)  # fmt: skip
     print(
-        "Bound estimate: a point in a cell costs about 60 floating-point operations (score,\n"
-        "gradient, Hessian; about 95 with the LM terms) plus one exp (~20 cycles): at two\n"
-        "scalar operations per cycle that is ~50 cycles (~70 with LM). Points outside a cell cost\n"
-        "only the lookup (~10). The data per pose fit in L1/L2 (source points 20 B each, cells\n"
-        "48 B), so memory traffic does not bound it; the loop is arithmetic-bound.\n"
+        "Bound estimate (cycles per evaluation on one core): a point in a cell costs about 60\n"
+        "floating-point operations (score, gradient, Hessian; ~95 with the LM terms) plus one\n"
+        f"exp (~20 cycles): at 2 scalar operations a cycle ~{_CYCLES} (~{_CYCLES_LM} with LM);\n"
+        f"a point outside any cell only its lookup (~{_CYCLES_MISS}). The data of a pose fit in\n"
+        "L1/L2 (source points 20 B each, cells 48 B): memory traffic does not bound the loop.\n"
     )
 
 

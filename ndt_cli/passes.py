@@ -120,8 +120,10 @@ def slice_pass(
     )
     if not inside:
         raise ValueError("points too far from the origin for voxel thinning")
-    slices = [np.ascontiguousarray(xy[(mask >> k) & 1 == 1]) for k in range(len(heights))]
-    grouped = (keys[:m].copy(), sums[:m].copy(), counts[:m].copy()) if voxel > 0 else None
+    hit = np.flatnonzero(mask)  # the few points in any slice, then per slice
+    sub_mask, sub_xy = mask[hit], xy[hit]
+    slices = [np.ascontiguousarray(sub_xy[(sub_mask >> k) & 1 == 1]) for k in range(len(heights))]
+    grouped = (keys[:m], sums[:m], counts[:m]) if voxel > 0 else None
     return slices, grouped
 
 
