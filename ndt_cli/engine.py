@@ -58,13 +58,14 @@ class TargetMaps:
         return self._maps[cell]
 
 
-def source_points(scan: PreparedScan, cfg: Config, cap: int) -> SourcePoints:
-    """Voxel-filtered slice points of the moving scan, at most ``cap`` per slice (deterministic)."""
+def source_points(
+    scan: PreparedScan, cfg: Config, cap: int, voxel: float | None = None
+) -> SourcePoints:
+    """Slice points of the moving scan voxel-filtered at ``voxel`` (default source.voxel), at
+    most ``cap`` per slice (deterministic)."""
+    v = cfg.source.voxel if voxel is None else voxel
     return SourcePoints.from_slices(
-        [
-            subsample(voxel_filter_2d(s, cfg.source.voxel), cap, seed=k)
-            for k, s in enumerate(scan.slices)
-        ]
+        [subsample(voxel_filter_2d(s, v), cap, seed=k) for k, s in enumerate(scan.slices)]
     )
 
 
@@ -76,12 +77,7 @@ def _level_points(
     voxel = max(cfg.source.voxel, cell * _VOXEL_PER_CELL)
     if voxel == cfg.source.voxel and cap is None:
         return fine
-    return SourcePoints.from_slices(
-        [
-            subsample(voxel_filter_2d(s, voxel), cap or cfg.source.points_per_slice, seed=k)
-            for k, s in enumerate(scan.slices)
-        ]
-    )
+    return source_points(scan, cfg, cap or cfg.source.points_per_slice, voxel)
 
 
 def search_starts(target: PreparedScan, source: PreparedScan, cfg: Config) -> np.ndarray:

@@ -9,6 +9,15 @@ from scipy.spatial import cKDTree
 VOXEL_OFFSET = 1 << 20  # voxel indices are packed as 21-bit fields: +-1e6 voxels from origin
 
 
+def voxel_keys(points: np.ndarray, voxel: float) -> np.ndarray:
+    """One int64 key per (N,3) point: its ``voxel`` cube's indices packed in 21-bit fields, so
+    that keys sort by x index, then y, then z."""
+    ijk = np.floor(points / voxel).astype(np.int64) + VOXEL_OFFSET
+    if len(ijk) and (ijk.min() < 0 or ijk.max() >= 2 * VOXEL_OFFSET):
+        raise ValueError("points too far from the origin for voxel thinning")
+    return (ijk[:, 0] << 42) | (ijk[:, 1] << 21) | ijk[:, 2]
+
+
 class VoxelThinner:
     """One point (the centroid) per ``voxel`` metre cube, accumulated over chunks of points.
 
@@ -23,14 +32,10 @@ class VoxelThinner:
     def add(self, points: np.ndarray) -> None:
         if len(points) == 0:
             return
-        ijk = np.floor(points / self.voxel).astype(np.int64) + VOXEL_OFFSET
-        if ijk.min() < 0 or ijk.max() >= 2 * VOXEL_OFFSET:
-            raise ValueError("points too far from the origin for voxel thinning")
-        keys = (ijk[:, 0] << 42) | (ijk[:, 1] << 21) | ijk[:, 2]
-        self.add_grouped(keys, points, np.ones(len(points)))
+        self.add_grouped(voxel_keys(points, self.voxel), points, np.ones(len(points)))
 
     def add_grouped(self, keys: np.ndarray, sums: np.ndarray, counts: np.ndarray) -> None:
-        """Add rows already grouped by voxel key (packed as in :meth:`add`): coordinate sums
+        """Add rows already grouped by voxel key (see :func:`voxel_keys`): coordinate sums
         (n,3) and point counts; a key may repeat."""
         self._parts.append(_grouped(keys, sums, counts))
         if len(self._parts) >= 4:  # memory grows with the voxels, not with the chunks

@@ -114,8 +114,8 @@ def optimize(
             steps = _newton_steps(a) * alpha[idx, None]
         else:
             steps = _lm_steps(a, lam[idx])
-        a_p = p[idx].copy()
-        prop = a_p + _cap(steps, max_t, max_r)
+        step = _cap(steps, max_t, max_r)
+        prop = p[idx] + step
         new = evaluate(prop)
         evaluations += len(idx)
         iters[idx] += 1
@@ -136,7 +136,7 @@ def optimize(
         active[idx] = (stall[idx] < cfg.patience) & (iters[idx] < cfg.max_iterations)
         history.append(best_p.copy())
         # a step that moves the pose by less than 0.1 mm / 1e-6 rad changes nothing more
-        tiny[idx] = _still(prop - a_p, _STEP_M, _STEP_RAD)
+        tiny[idx] = _still(step, _STEP_M, _STEP_RAD)
         active[idx] &= ~tiny[idx]
         row = np.full(n, np.nan)
         row[idx] = best[idx]

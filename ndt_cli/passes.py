@@ -13,6 +13,7 @@ import numba
 import numpy as np
 
 from ndt_cli.geometry import VOXEL_OFFSET as _OFFSET
+from ndt_cli.geometry import voxel_keys
 from ndt_cli.slicing import cut_slices
 
 MAX_SLICES = 63  # slice membership is a bit mask in an int64
@@ -140,6 +141,4 @@ def slice_pass_numpy(
     slices = cut_slices(rel @ np.asarray(level).T, 0.0, heights, thickness)
     if voxel <= 0:
         return slices, None
-    ijk = np.floor(rel / voxel).astype(np.int64) + _OFFSET
-    keys = (ijk[:, 0] << 42) | (ijk[:, 1] << 21) | ijk[:, 2]
-    return slices, (keys, rel, np.ones(len(rel)))
+    return slices, (voxel_keys(rel, voxel), rel, np.ones(len(rel)))
