@@ -11,8 +11,8 @@ from pathlib import Path
 import laspy
 import numpy as np
 
-from ndt_cli import io, simulate
-from ndt_cli.transforms import format_matrix
+from ndt_cli import io, sim
+from ndt_cli.io.matrices import format_matrix
 
 ROOT = Path(__file__).resolve().parents[1]
 CACHE = ROOT / "benchmarks" / ".cache"
@@ -22,7 +22,7 @@ RAYS = {"n_azimuth": 4500, "n_elevation": 640}  # ~2 M points per scan
 
 
 def _key() -> str:
-    text = (ROOT / "ndt_cli" / "simulate.py").read_bytes()
+    text = (ROOT / "ndt_cli" / "sim.py").read_bytes()
     return hashlib.sha256(text + repr((N_SCANS, SEED, RAYS)).encode()).hexdigest()[:12]
 
 
@@ -35,7 +35,7 @@ def street() -> tuple[list[Path], Path]:
         return files, poses_file
     folder.mkdir(parents=True, exist_ok=True)
     print(f"making {N_SCANS} full-density scans in {folder} (once) ...", flush=True)
-    _, scans, poses = simulate.make_sequence(seed=SEED, n_scans=N_SCANS, scan_kwargs=RAYS)
+    _, scans, poses = sim.make_sequence(seed=SEED, n_scans=N_SCANS, scan_kwargs=RAYS)
     for f, pts in zip(files, scans, strict=True):
         io.write(f, pts)
     lines = [

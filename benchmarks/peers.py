@@ -64,7 +64,7 @@ import numpy as np
 if __package__ in (None, ""):  # run as a script: make the repository root importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ndt_cli.transforms import pose2d_matrix
+from ndt_cli.core.transforms import pose2d_matrix
 
 NO_GUESS = "no guess"
 NAN = float("nan")
@@ -465,7 +465,7 @@ def format_table(rows: list[dict]) -> str:
 def main(argv: list[str] | None = None) -> None:
     """Command line: two point files and a 4x4 ground-truth ``T_target_source`` text file."""
     from ndt_cli import io
-    from ndt_cli.transforms import read_matrix
+    from ndt_cli.io.matrices import read_matrix
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("target", help="target point file (.ply .las .laz .pcd .xyz .txt)")

@@ -28,11 +28,13 @@ import numpy as np  # noqa: E402
 import ndt_cli  # noqa: E402
 from benchmarks import data  # noqa: E402
 from ndt_cli.config import Config  # noqa: E402
-from ndt_cli.engine import TargetMaps, register_prepared, source_points  # noqa: E402
-from ndt_cli.kernels import MATCHED, evaluate  # noqa: E402
-from ndt_cli.prepare import ScanChunks, prepare_chunks  # noqa: E402
-from ndt_cli.report import write_register_outputs  # noqa: E402
-from ndt_cli.transforms import read_pose_list, transform_errors, yaw_of  # noqa: E402
+from ndt_cli.core.transforms import transform_errors, yaw_of  # noqa: E402
+from ndt_cli.io.matrices import read_pose_list  # noqa: E402
+from ndt_cli.ndt.kernels import MATCHED, accumulate  # noqa: E402
+from ndt_cli.ndt.levels import SourceSampler, TargetMaps, source_points  # noqa: E402
+from ndt_cli.ndt.prepare import ScanChunks, load_and_prepare_chunks  # noqa: E402
+from ndt_cli.ndt.register import register_prepared  # noqa: E402
+from ndt_cli.report.register_outputs import write_register_outputs  # noqa: E402
 
 BIN = Path(sys.executable).parent
 _CYCLES, _CYCLES_LM, _CYCLES_MISS = 50, 70, 10  # estimated cycles per point evaluation
@@ -83,41 +85,71 @@ def cpu_mhz() -> float:
 def kernel_throughput(cfg: Config, files: list[Path], gt: np.ndarray, mhz: float) -> None:
     """Point evaluations per second of the NDT kernel, at the solution (every point in a cell,
     as in the fine levels) and for a search batch of random poses."""
-    target = prepare_chunks(ScanChunks.of(files[0], cfg.input), cfg)
-    source = prepare_chunks(ScanChunks.of(files[1], cfg.input), cfg)
-    maps = TargetMaps(target, cfg)
-    fine = source_points(source, cfg, cfg.source.points_per_slice)
-    coarse = source_points(source, cfg, cfg.search.points_per_slice)
+    target = load_and_prepare_chunks(ScanChunks.of(files[0], cfg.input), cfg)
+    source = load_and_prepare_chunks(ScanChunks.of(files[1], cfg.input), cfg)
+    maps = TargetMaps(target.slices, cfg.grid)
+    fine = SourceSampler(source.slices, cfg.source).fine
+    coarse = source_points(source.slices, cfg.source.voxel, cfg.search.points_per_slice)
     L = target.to_local() @ gt @ source.from_local()
     truth = np.array([L[0, 3], L[1, 3], yaw_of(L)])
     rng = np.random.default_rng(0)
     offsets = np.column_stack([rng.uniform(-40, 40, (984, 2)), rng.uniform(-np.pi, np.pi, 984)])
     cases = [
-        ("fine: 72 poses near the solution, 1 m", 1.0, fine,
-         truth + rng.normal(0, [0.2, 0.2, 0.002], (72, 3))),
-        ("search: 984 random poses, 20 m", 20.0, coarse,
-         offsets + np.array([truth[0], truth[1], 0.0])),
-    ]  # fmt: skip
+        (
+            "fine: 72 poses near the solution, 1 m",
+            1.0,
+            fine,
+            truth + rng.normal(0, [0.2, 0.2, 0.002], (72, 3)),
+        ),
+        (
+            "search: 984 random poses, 20 m",
+            20.0,
+            coarse,
+            offsets + np.array([truth[0], truth[1], 0.0]),
+        ),
+    ]
     rows = []
     threads_all = numba.config.NUMBA_NUM_THREADS
     for label, cell, src, params in cases:
-        matched = evaluate(maps(cell), src, params)[:, MATCHED].sum() / (len(params) * len(src))
+        matched = accumulate(maps(cell), src, params)[:, MATCHED].sum() / (len(params) * len(src))
         for lm in (False, True):
-            evaluate(maps(cell), src, params, lm)  # compiled / warm
+            accumulate(maps(cell), src, params, lm)  # compiled / warm
             for threads in sorted({1, threads_all}):
                 numba.set_num_threads(threads)
-                t = best_of(lambda c=cell, s=src, p=params, m=lm: evaluate(maps(c), s, p, m))
+                t = best_of(lambda c=cell, s=src, p=params, m=lm: accumulate(maps(c), s, p, m))
                 evals = len(params) * len(src)
                 rate = evals / t
                 cycles = mhz * 1e6 * threads / rate  # core cycles per evaluation
                 bound = matched * (_CYCLES_LM if lm else _CYCLES) + (1 - matched) * _CYCLES_MISS
-                rows.append([label, "newton" if not lm else "newton+LM", str(threads),
-                             f"{evals / 1e6:.1f} M", f"{matched:.2f}", f"{rate / 1e6:.0f}",
-                             f"{cycles:.0f}", f"{bound:.0f}", f"{bound / cycles:.0%}"])  # fmt: skip
+                rows.append(
+                    [
+                        label,
+                        "newton" if not lm else "newton+LM",
+                        str(threads),
+                        f"{evals / 1e6:.1f} M",
+                        f"{matched:.2f}",
+                        f"{rate / 1e6:.0f}",
+                        f"{cycles:.0f}",
+                        f"{bound:.0f}",
+                        f"{bound / cycles:.0%}",
+                    ]
+                )
     numba.set_num_threads(threads_all)
     print("## NDT kernel (score, gradient, Hessian; + LM terms): point evaluations per second\n")
-    table(["case", "terms", "threads", "evals", "in a cell", "M evals/s", "cycles/eval",
-           "bound", "of bound"], rows)  # fmt: skip
+    table(
+        [
+            "case",
+            "terms",
+            "threads",
+            "evals",
+            "in a cell",
+            "M evals/s",
+            "cycles/eval",
+            "bound",
+            "of bound",
+        ],
+        rows,
+    )
     print(
         "Bound estimate (cycles per evaluation on one core): a point in a cell costs about 60\n"
         "floating-point operations (score, gradient, Hessian; ~95 with the LM terms) plus one\n"
@@ -134,7 +166,7 @@ def stage_times(cfg: Config, files: list[Path], gt: np.ndarray) -> None:
     chunks = [ScanChunks.of(f, cfg.input) for f in (a, b)]
     t_read = time.perf_counter() - t0
     t0 = time.perf_counter()
-    scans = [prepare_chunks(c, cfg) for c in chunks]
+    scans = [load_and_prepare_chunks(c, cfg) for c in chunks]
     t_prepare = time.perf_counter() - t0
     t0 = time.perf_counter()
     result = register_prepared(scans[0], scans[1], cfg)
@@ -172,17 +204,41 @@ def end_to_end(files: list[Path]) -> None:
         before = {p: p.stat().st_mtime_ns for p in Path(cache).rglob("*")}
         warm = [measured(reg, {"NUMBA_CACHE_DIR": cache}) for _ in range(3)]
         after = {p: p.stat().st_mtime_ns for p in Path(cache).rglob("*")}
-    rows.append(["ndt-register, first run ever (compiles)", f"{cold['wall_s']:.2f}",
-                 f"{cold['peak_mb']:.0f}"])  # fmt: skip
+    rows.append(
+        [
+            "ndt-register, first run ever (compiles)",
+            f"{cold['wall_s']:.2f}",
+            f"{cold['peak_mb']:.0f}",
+        ]
+    )
     best = min(warm, key=lambda r: r["wall_s"])
-    rows.append(["ndt-register, fresh process, cached kernels", f"{best['wall_s']:.2f}",
-                 f"{best['peak_mb']:.0f}"])  # fmt: skip
+    rows.append(
+        [
+            "ndt-register, fresh process, cached kernels",
+            f"{best['wall_s']:.2f}",
+            f"{best['peak_mb']:.0f}",
+        ]
+    )
     scans = [str(f) for f in files]
     for jobs in (1, 2):
-        r = measured([str(BIN / "ndt-chain"), *scans, "--jobs", str(jobs), "--quiet",
-                      "--out", str(OUT / f"chain{jobs}")])  # fmt: skip
-        rows.append([f"ndt-chain of {len(files)} scans, --jobs {jobs}", f"{r['wall_s']:.2f}",
-                     f"{r['peak_mb']:.0f}"])  # fmt: skip
+        r = measured(
+            [
+                str(BIN / "ndt-chain"),
+                *scans,
+                "--jobs",
+                str(jobs),
+                "--quiet",
+                "--out",
+                str(OUT / f"chain{jobs}"),
+            ]
+        )
+        rows.append(
+            [
+                f"ndt-chain of {len(files)} scans, --jobs {jobs}",
+                f"{r['wall_s']:.2f}",
+                f"{r['peak_mb']:.0f}",
+            ]
+        )
     print("## End to end (fresh processes; peak memory of the largest process)\n")
     table(["run", "wall (s)", "peak (MB)"], rows)
     hit = "yes" if before == after else "no (the cache changed)"
@@ -195,14 +251,21 @@ def scaling(base: Path, sizes: list[int]) -> None:
         f = data.tiled(base, n)
         code = (
             "import time; from ndt_cli.config import Config; "
-            "from ndt_cli.prepare import load_and_prepare; t = time.perf_counter(); "
+            "from ndt_cli.ndt.prepare import load_and_prepare; t = time.perf_counter(); "
             f"load_and_prepare({str(f)!r}, Config()); print(time.perf_counter() - t)"
         )
         r = measured([sys.executable, "-c", code])
         inner = float(r["last"])
-        rows.append([f"{n / 1e6:g} M", f"{f.stat().st_size / 2**20:.0f}", f"{inner:.2f}",
-                     f"{n / inner / 1e6:.1f}", f"{r['wall_s']:.2f}",
-                     f"{r['peak_mb']:.0f}"])  # fmt: skip
+        rows.append(
+            [
+                f"{n / 1e6:g} M",
+                f"{f.stat().st_size / 2**20:.0f}",
+                f"{inner:.2f}",
+                f"{n / inner / 1e6:.1f}",
+                f"{r['wall_s']:.2f}",
+                f"{r['peak_mb']:.0f}",
+            ]
+        )
     print("## Reading and preparing one LAS file: read, ground, levelling, slices, ICP thinning")
     print("(each in a fresh process; 'prepare' is the call itself, 'process' adds start-up)\n")
     table(["points", "file (MB)", "prepare (s)", "M points/s", "process (s)", "peak (MB)"], rows)
@@ -220,19 +283,37 @@ def peers(files: list[Path], gt: np.ndarray) -> None:
         r = ndt_cli.register(target, source, init=init)
         wall = time.perf_counter() - t0
         rot, trans = errors(r.T_target_source, gt)
-        ours.append({"peer": f"ndt-cli {ndt_cli.__version__}", "start": label, "wall_s": wall,
-                     "rot_err_deg": rot, "trans_err_m": trans, "note": r.status})  # fmt: skip
+        ours.append(
+            {
+                "peer": f"ndt-cli {ndt_cli.__version__}",
+                "start": label,
+                "wall_s": wall,
+                "rot_err_deg": rot,
+                "trans_err_m": trans,
+                "note": r.status,
+            }
+        )
     rows = []
     mine = {row["start"]: row["wall_s"] for row in ours}
     for row in ours + peer_rows(target, source, gt):
         ratio = mine[row["start"]] / row["wall_s"] if np.isfinite(row["wall_s"]) else float("nan")
-        rows.append([row["peer"], row["start"], f"{row['wall_s']:.2f}",
-                     f"{row['rot_err_deg']:.3f}", f"{row['trans_err_m']:.3f}",
-                     f"{ratio:.2f}", row["note"]])  # fmt: skip
+        rows.append(
+            [
+                row["peer"],
+                row["start"],
+                f"{row['wall_s']:.2f}",
+                f"{row['rot_err_deg']:.3f}",
+                f"{row['trans_err_m']:.3f}",
+                f"{ratio:.2f}",
+                row["note"],
+            ]
+        )
     n = f"{len(target):,} + {len(source):,}"
     print(f"## Peers on the same pair ({n} points, arrays in memory)\n")
-    table(["tool", "start", "wall (s)", "rot err (deg)", "trans err (m)", "ndt-cli/peer", "note"],
-          rows)  # fmt: skip
+    table(
+        ["tool", "start", "wall (s)", "rot err (deg)", "trans err (m)", "ndt-cli/peer", "note"],
+        rows,
+    )
 
 
 def main() -> int:

@@ -1,5 +1,14 @@
 """ndt-cli: marker-free registration of terrestrial laser scans with multi-slice 2D NDT.
 
+One call registers two scans (file paths or (N,3) arrays, metres)::
+
+    import ndt_cli
+    result = ndt_cli.register("scan_00.laz", "scan_01.laz")
+    result.T_target_source, result.status
+
+The public names are loaded on first use, so importing the package (and every command's
+``--help``) stays fast.
+
 >>> import ndt_cli
 >>> callable(ndt_cli.register)
 True
@@ -7,43 +16,60 @@ True
 
 from __future__ import annotations
 
-import time
-from pathlib import Path
-from typing import TYPE_CHECKING
+from importlib import import_module
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
+__version__ = "0.2.0"
+
+_PUBLIC = {
+    "register": "ndt_cli.ndt.register",
+    "register_prepared": "ndt_cli.ndt.register",
+    "RegistrationResult": "ndt_cli.ndt.result",
+    "Status": "ndt_cli.ndt.result",
+    "PreparedScan": "ndt_cli.ndt.prepare",
+    "load_and_prepare": "ndt_cli.ndt.prepare",
+    "Config": "ndt_cli.config",
+    "load_config": "ndt_cli.config",
+    "read": "ndt_cli.io",
+    "write": "ndt_cli.io",
+    "NUMBA": "ndt_cli.ndt.backend",
+    "NUMPY": "ndt_cli.ndt.backend",
+}
+_RENAMED = {"load_config": "load"}
+
+__all__ = [
+    "NUMBA",
+    "NUMPY",
+    "Config",
+    "PreparedScan",
+    "RegistrationResult",
+    "Status",
+    "__version__",
+    "load_and_prepare",
+    "load_config",
+    "read",
+    "register",
+    "register_prepared",
+    "write",
+]
 
 if TYPE_CHECKING:
     from ndt_cli.config import Config
-    from ndt_cli.result import RegistrationResult
+    from ndt_cli.config import load as load_config
+    from ndt_cli.io import read, write
+    from ndt_cli.ndt.backend import NUMBA, NUMPY
+    from ndt_cli.ndt.prepare import PreparedScan, load_and_prepare
+    from ndt_cli.ndt.register import register, register_prepared
+    from ndt_cli.ndt.result import RegistrationResult, Status
 
-__all__ = ["register"]
-__version__ = "0.1.0"
+
+def __getattr__(name: str) -> Any:
+    if name not in _PUBLIC:
+        raise AttributeError(f"module 'ndt_cli' has no attribute {name!r}")
+    value = getattr(import_module(_PUBLIC[name]), _RENAMED.get(name, name))
+    globals()[name] = value
+    return value
 
 
-def register(
-    target: str | Path | np.ndarray,
-    source: str | Path | np.ndarray,
-    config: Config | str | Path | None = None,
-    init: np.ndarray | None = None,
-) -> RegistrationResult:
-    """Register SOURCE onto TARGET; the result's ``T_target_source`` maps source to target.
-
-    ``target``/``source`` are point files (PLY, LAS/LAZ, xyz/txt/csv, PCD) or (N,3) arrays in
-    metres; ``config`` a :class:`~ndt_cli.config.Config`, a YAML path or ``None`` for the defaults;
-    ``init`` an optional 4x4 guess of ``T_target_source`` (no guess: a start search is run).
-    """
-    from dataclasses import replace
-
-    from ndt_cli import config as config_mod
-    from ndt_cli.engine import register_prepared
-    from ndt_cli.prepare import load_and_prepare
-
-    t0 = time.perf_counter()
-    cfg = config if isinstance(config, config_mod.Config) else config_mod.load(config)
-    tgt = load_and_prepare(target, cfg)
-    src = load_and_prepare(source, cfg)
-    t_read = time.perf_counter() - t0
-    result = register_prepared(tgt, src, cfg, init)
-    timings = {"read_prepare_s": t_read, **result.timings}
-    return replace(result, runtime_s=time.perf_counter() - t0, timings=timings)
+def __dir__() -> list[str]:
+    return sorted(__all__)

@@ -29,9 +29,9 @@ def shared_data_dir() -> Path:
 
 def street_files(folder: Path, n_scans: int = 4, seed: int = 21) -> tuple[list[Path], list]:
     """A short simulated street written as LAZ files ``scan_K.laz``; returns (files, poses)."""
-    from ndt_cli import io, simulate
+    from ndt_cli import io, sim
 
-    _, scans, poses = simulate.make_sequence(
+    _, scans, poses = sim.make_sequence(
         seed=seed, n_scans=n_scans, spacing=(13.0, 17.0), scan_kwargs={"n_azimuth": 1000}
     )
     files = []

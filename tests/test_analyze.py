@@ -8,18 +8,19 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from ndt_cli import analyze, io, simulate
+from ndt_cli import io, sim
+from ndt_cli.analysis import experiments as analyze
 from ndt_cli.cli import analyze_app
 from ndt_cli.config import Config
-from ndt_cli.prepare import prepare
-from ndt_cli.transforms import format_matrix
+from ndt_cli.io.matrices import format_matrix
+from ndt_cli.ndt.prepare import prepare
 
 runner = CliRunner()
 
 
 @pytest.fixture(scope="module")
 def pair():
-    _, scans, poses = simulate.make_sequence(
+    _, scans, poses = sim.make_sequence(
         seed=21, n_scans=2, spacing=(13.0, 17.0), scan_kwargs={"n_azimuth": 1000}
     )
     cfg = Config()
@@ -46,13 +47,16 @@ def test_translation_profile_peaks_at_zero(pair):
         assert abs(best["dx_m"]) <= 2.0 and abs(best["dy_m"]) <= 2.0
 
 
+@pytest.mark.slow
 def test_basin_multi_slice_succeeds_at_least_as_often_as_one_slice(pair):
     cfg, p, _, _ = pair
     offsets = analyze.basin_offsets(12.0, 6.0, 20.0, 20.0)
     rows = analyze.basin(p, cfg, offsets, jobs=2)
     assert len(rows) == 3 * len(offsets)
-    rate = {v: np.mean([r["success"] for r in rows if r["variant"] == v])
-            for v in analyze.BASIN_VARIANTS}  # fmt: skip
+    rate = {
+        v: np.mean([r["success"] for r in rows if r["variant"] == v])
+        for v in analyze.BASIN_VARIANTS
+    }
     assert rate["all slices, single start"] >= rate["1 slice, single start"]
     assert rate["all slices, multi-start"] >= rate["all slices, single start"]
     assert rate["all slices, multi-start"] > 0.5
@@ -78,12 +82,12 @@ def test_optimizer_traces_cover_each_method_and_end_near_the_truth(pair):
     ends = {m: [r for r in rows if r["method"] == m][-1] for m in ("newton", "lm_fixed", "lm")}
     assert abs(ends["newton"]["tx_m"] - p.aligned[0]) < 0.05
     assert abs(ends["newton"]["ty_m"] - p.aligned[1]) < 0.05
-    from ndt_cli.engine import TargetMaps, source_points
-    from ndt_cli.kernels import evaluate
+    from ndt_cli.ndt.kernels import accumulate
+    from ndt_cli.ndt.levels import SourceSampler, TargetMaps
 
     start = p.aligned + np.array([1.0, -1.0, np.radians(2.0)])
-    src = source_points(p.source, cfg, cfg.source.points_per_slice)
-    start_score = evaluate(TargetMaps(p.target, cfg)(cells[0]), src, start)[0, 0]
+    src = SourceSampler(p.source.slices, cfg.source).fine
+    start_score = accumulate(TargetMaps(p.target.slices, cfg.grid)(cells[0]), src, start)[0, 0]
     for m in ("lm_fixed", "lm"):  # both raise the score of their start at the first level
         best = max(r["score"] for r in rows if r["method"] == m and r["cell_m"] == cells[0])
         assert best > start_score
@@ -95,9 +99,20 @@ def test_cli_writes_csv_with_units_and_png(pair, tmp_path):
     io.write(tmp_path / "b.laz", scans[1])
     (tmp_path / "T.txt").write_text(format_matrix(truth))
     out = tmp_path / "out"
-    res = runner.invoke(analyze_app, ["score-profile", str(tmp_path / "a.laz"),
-                                      str(tmp_path / "b.laz"), "--at", str(tmp_path / "T.txt"),
-                                      "--out", str(out), "--step-deg", "10"])  # fmt: skip
+    res = runner.invoke(
+        analyze_app,
+        [
+            "score-profile",
+            str(tmp_path / "a.laz"),
+            str(tmp_path / "b.laz"),
+            "--at",
+            str(tmp_path / "T.txt"),
+            "--out",
+            str(out),
+            "--step-deg",
+            "10",
+        ],
+    )
     assert res.exit_code == 0, res.output
     with open(out / "score_rotation.csv") as fh:
         header = next(csv.reader(fh))

@@ -11,10 +11,12 @@ import pytest
 from conftest import shared_data, street_files
 from typer.testing import CliRunner
 
-from ndt_cli import simulate
-from ndt_cli.chain import natural_sort, plan_links
+from ndt_cli import sim
 from ndt_cli.cli import chain_app
-from ndt_cli.transforms import read_matrix, read_pose_list, yaw_of
+from ndt_cli.core.transforms import yaw_of
+from ndt_cli.io.matrices import read_matrix, read_pose_list
+from ndt_cli.pipeline.chain import plan_links
+from ndt_cli.pipeline.scans import natural_sort
 
 runner = CliRunner()
 CHAIN = [sys.executable, "-c", "from ndt_cli.cli import chain_app; chain_app()"]
@@ -52,6 +54,7 @@ def outputs(out):
     return pairs, (out / "poses.txt").read_text(), (out / "poses.csv").read_text(), links
 
 
+@pytest.mark.slow
 def test_chain_recovers_ground_truth_and_jobs_do_not_matter(sequence, tmp_path):
     files, poses = sequence
     res1 = run(files, tmp_path / "j1", "--jobs", "1")
@@ -73,6 +76,7 @@ def test_chain_recovers_ground_truth_and_jobs_do_not_matter(sequence, tmp_path):
     assert outputs(tmp_path / "j1") == outputs(tmp_path / "j2")
 
 
+@pytest.mark.slow
 def test_anchor_defines_the_world(sequence, tmp_path):
     files, poses = sequence
     assert run(files, tmp_path / "a", "--anchor", "2", "--jobs", "2").exit_code == 0
@@ -83,6 +87,7 @@ def test_anchor_defines_the_world(sequence, tmp_path):
     assert rot < 0.5 and trans < 0.3
 
 
+@pytest.mark.slow
 def test_unreadable_scan_in_the_middle_fails_its_link_and_the_chain_goes_on(sequence, tmp_path):
     files, poses = sequence
     bad = tmp_path / "scan_1.laz"
@@ -117,6 +122,7 @@ def test_bad_chain_input_is_exit_2(tmp_path):
     assert res.exit_code == 2 and "at least two" in res.stderr
 
 
+@pytest.mark.slow
 def test_mulls_street_sequence_matches_icp_reference(tmp_path):
     folder = shared_data("mulls_demo_hdl64_sequence")
     refs = np.loadtxt(folder / "reference_icp_relative_4x4.txt").reshape(-1, 4, 4)
@@ -129,11 +135,12 @@ def test_mulls_street_sequence_matches_icp_reference(tmp_path):
         assert rot < 0.5 and trans < 0.10, (k, rot, trans)
 
 
+@pytest.mark.slow
 def test_chain_registers_the_scans_inside_one_e57_file(tmp_path):
     pytest.importorskip("pye57", reason="the e57 extra is not installed")
-    from ndt_cli import e57
+    from ndt_cli.io import e57
 
-    _, scans, poses = simulate.make_sequence(
+    _, scans, poses = sim.make_sequence(
         seed=21, n_scans=3, spacing=(13.0, 17.0), scan_kwargs={"n_azimuth": 1000}
     )
     header = [np.linalg.inv(poses[0]) @ T for T in poses]  # what a scanner might have stored

@@ -9,9 +9,10 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from ndt_cli import io, simulate
+from ndt_cli import io, sim
 from ndt_cli.cli import register_app
-from ndt_cli.transforms import read_matrix, transform_errors
+from ndt_cli.core.transforms import transform_errors
+from ndt_cli.io.matrices import read_matrix
 
 runner = CliRunner()
 
@@ -19,7 +20,7 @@ runner = CliRunner()
 @pytest.fixture(scope="module")
 def pair(tmp_path_factory):
     d = tmp_path_factory.mktemp("scans")
-    _, scans, poses = simulate.make_sequence(seed=11, n_scans=2)
+    _, scans, poses = sim.make_sequence(seed=11, n_scans=2)
     io.write(d / "a.laz", scans[0])
     io.write(d / "b.ply", scans[1])
     return d / "a.laz", d / "b.ply", np.linalg.inv(poses[0]) @ poses[1]

@@ -13,9 +13,12 @@ pytest.importorskip("distributed", reason="the dask extra (dask[distributed]) is
 from conftest import street_files
 from distributed import Client, LocalCluster
 
-from ndt_cli.chain import run_chain
-from ndt_cli.chain_report import write_chain_outputs
 from ndt_cli.config import Config
+from ndt_cli.pipeline.chain import run_chain
+from ndt_cli.pipeline.executors import ExecutorKind, make_executor
+from ndt_cli.report.chain_outputs import write_chain_outputs
+
+pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")
@@ -24,6 +27,11 @@ def cluster():
         n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0"
     ) as c:
         yield c
+
+
+def _dask(cluster):
+    """An executor on the test cluster."""
+    return make_executor(ExecutorKind.DASK, 2, cluster.scheduler_address)
 
 
 @pytest.fixture(scope="module")
@@ -40,17 +48,19 @@ def local_run(files, tmp_path_factory):
 
 def _outputs(result):
     return [
-        (link.index, link.status, None if link.T_target_source is None
-         else link.T_target_source.tobytes())
+        (
+            link.index,
+            link.status,
+            None if link.T_target_source is None else link.T_target_source.tobytes(),
+        )
         for link in result.links
-    ] + [None if T is None else T.tobytes() for T in result.poses]  # fmt: skip
+    ] + [None if T is None else T.tobytes() for T in result.poses]
 
 
 def test_dask_gives_the_same_results_as_local(cluster, files, local_run, tmp_path):
     local, _ = local_run
     cfg = Config()
-    dask = run_chain(files, cfg, tmp_path / "dask", executor="dask",
-                     scheduler=cluster.scheduler_address)  # fmt: skip
+    dask = run_chain(files, cfg, tmp_path / "dask", executor=_dask(cluster))
     assert all(link.ok for link in dask.links) and len(dask.links) == 3
     assert _outputs(dask) == _outputs(local)
     write_chain_outputs(tmp_path / "dask", dask, cfg, 0.0)
@@ -66,8 +76,7 @@ def test_resume_skips_finished_links_before_submission(cluster, files, local_run
     cfg = Config()
     out = tmp_path / "o"
     shutil.copytree(local_out / "links", out / "links")  # the finished links of the local run
-    again = run_chain(files, cfg, out, resume=True, executor="dask",
-                      scheduler=cluster.scheduler_address)  # fmt: skip
+    again = run_chain(files, cfg, out, resume=True, executor=_dask(cluster))
     assert again.reused == (0, 1, 2)
     assert _outputs(again) == _outputs(local)
 
@@ -84,8 +93,13 @@ def test_a_worker_killed_mid_run_does_not_stop_the_chain(cluster, files, local_r
             os.kill(pids[0], signal.SIGKILL)
             killed.append(pids[0])
 
-    result = run_chain([*files, *files[:2]], cfg, tmp_path / "o", executor="dask",
-                       scheduler=cluster.scheduler_address, on_progress=kill_one)  # fmt: skip
+    result = run_chain(
+        [*files, *files[:2]],
+        cfg,
+        tmp_path / "o",
+        executor=_dask(cluster),
+        on_progress=kill_one,
+    )
     assert killed and len(result.links) == 5
     assert all(link.status in ("ok", "suspect", "degenerate") for link in result.links)
     for a, b in zip(result.links[:3], reference.links, strict=True):
@@ -95,8 +109,12 @@ def test_a_worker_killed_mid_run_does_not_stop_the_chain(cluster, files, local_r
 def test_a_scan_that_cannot_be_read_fails_its_link_once(cluster, files, tmp_path):
     bad = tmp_path / "scan_1.laz"
     bad.write_bytes(files[1].read_bytes()[:4000])  # truncated: fails for its data
-    result = run_chain([files[0], bad, files[2]], Config(), tmp_path / "o", executor="dask",
-                       scheduler=cluster.scheduler_address)  # fmt: skip
+    result = run_chain(
+        [files[0], bad, files[2]],
+        Config(),
+        tmp_path / "o",
+        executor=_dask(cluster),
+    )
     assert result.links[0].status == "failed" and "scan_1.laz" in result.links[0].reason
     assert (result.links[1].target, result.links[1].source) == (0, 2)
     assert result.unreadable and 1 in result.unreadable

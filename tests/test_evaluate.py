@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from ndt_cli.analysis.accuracy import compare_with_reference
 from ndt_cli.cli import eval_app
-from ndt_cli.evaluate import evaluate
-from ndt_cli.transforms import format_matrix, pose2d_matrix
+from ndt_cli.core.transforms import pose2d_matrix
+from ndt_cli.io.matrices import format_matrix
 
 runner = CliRunner()
 
@@ -50,7 +51,7 @@ def test_errors_success_rates_and_drift(tmp_path):
     poses = [pose2d_matrix(20.0 * k, 1.0, 0.3 * k) for k in range(4)]
     errors = [(np.radians(0.05), 0.01), (np.radians(1.0), 0.05), (0.0, 0.5)]
     gt = _chain_dir(tmp_path, poses, errors)
-    ev = evaluate(tmp_path, gt)
+    ev = compare_with_reference(tmp_path, gt)
     rot = [r["rotation_error_deg"] for r in ev.links]
     trans = [r["translation_error_m"] for r in ev.links]
     np.testing.assert_allclose(rot, [0.05, 1.0, 0.0], atol=1e-9)

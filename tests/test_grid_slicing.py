@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ndt_cli.grid import build_map, regularised_inverse
-from ndt_cli.slicing import cut_slices, estimate_ground, subsample, voxel_filter_2d
+from ndt_cli.ndt.grid import build_map, regularised_inverse
+from ndt_cli.ndt.slicing import cut_slices, estimate_ground, subsample, voxel_filter_2d
 
 
 def test_cell_mean_and_covariance_match_numpy():
@@ -87,15 +87,15 @@ def test_voxel_filter_and_subsample_are_deterministic():
 @pytest.fixture(scope="module")
 def tilted_scan():
     """A simulated street scan from a scanner tilted 8 deg in roll and 6 deg in pitch."""
-    from ndt_cli import simulate
+    from ndt_cli import sim
 
-    scene = simulate.make_street(seed=3)
-    T = simulate.scanner_pose(0.0, 0.0, 30.0, roll_deg=8.0, pitch_deg=-6.0)
-    return simulate.simulate_scan(scene, T, n_azimuth=720, n_elevation=100), T
+    scene = sim.make_street(seed=3)
+    T = sim.scanner_pose(0.0, 0.0, 30.0, roll_deg=8.0, pitch_deg=-6.0)
+    return sim.simulate_scan(scene, T, n_azimuth=720, n_elevation=100), T
 
 
 def test_dominant_up_finds_the_ground_normal_of_a_strongly_tilted_scanner(tilted_scan):
-    from ndt_cli.geometry import dominant_up
+    from ndt_cli.core.geometry import dominant_up
 
     pts, T = tilted_scan
     up = dominant_up(pts)
@@ -106,7 +106,7 @@ def test_dominant_up_finds_the_ground_normal_of_a_strongly_tilted_scanner(tilted
 
 def test_prepare_levels_a_strongly_tilted_scan(tilted_scan):
     from ndt_cli.config import Config
-    from ndt_cli.prepare import prepare
+    from ndt_cli.ndt.prepare import prepare
 
     pts, T = tilted_scan
     scan = prepare(pts, Config())
@@ -119,7 +119,7 @@ def test_prepare_levels_a_strongly_tilted_scan(tilted_scan):
 
 
 def test_voxel_thinning_does_not_depend_on_chunking():
-    from ndt_cli.geometry import VoxelThinner, voxel_thin
+    from ndt_cli.core.geometry import VoxelThinner, voxel_thin
 
     rng = np.random.default_rng(5)
     pts = rng.uniform(-30, 30, (20000, 3))
@@ -139,7 +139,7 @@ def test_voxel_thinning_does_not_depend_on_chunking():
 def test_a_streamed_scan_is_prepared_like_one_read_at_once(tilted_scan, tmp_path):
     from ndt_cli import io
     from ndt_cli.config import Config
-    from ndt_cli.prepare import load_and_prepare
+    from ndt_cli.ndt.prepare import load_and_prepare
 
     pts, _ = tilted_scan
     path = tmp_path / "scan.las"
@@ -155,9 +155,9 @@ def test_a_streamed_scan_is_prepared_like_one_read_at_once(tilted_scan, tmp_path
 
 
 def test_slice_pass_matches_its_numpy_twin_with_overlapping_slices():
-    from ndt_cli.geometry import VoxelThinner
-    from ndt_cli.passes import bounds, slice_pass, slice_pass_numpy
-    from ndt_cli.transforms import levelling_rotation
+    from ndt_cli.core.geometry import VoxelThinner
+    from ndt_cli.core.transforms import levelling_rotation
+    from ndt_cli.ndt.passes import bounds, slice_pass, slice_pass_numpy
 
     rng = np.random.default_rng(8)
     pts = np.repeat(rng.uniform([-40, -40, -2], [40, 40, 15], (3000, 3)), 3, axis=0)  # runs

@@ -16,6 +16,9 @@ from conftest import shared_data
 
 from ndt_cli import io as ndt_io
 from ndt_cli.errors import InputError, OutputError
+from ndt_cli.io import formats
+from ndt_cli.io.formats import LasReader
+from ndt_cli.io.points import READERS
 
 ALL_SUFFIXES = (".ply", ".las", ".laz", ".pcd", ".xyz", ".txt", ".csv")
 
@@ -162,7 +165,7 @@ def test_chunked_las_matches_one_shot_read(
     path = _las(tmp_path / f"big{suffix}", pts, scale=0.01, offsets=(1000.0, 5e6, 0.0))
     las = laspy.read(path)
     expected = np.column_stack([las.x, las.y, las.z])
-    got = ndt_io.LasReader(chunk_size=999).read_xyz(path)
+    got = np.concatenate(list(LasReader().iter_xyz(path, 999)))
     assert las_chunks == [(999, 999)] * 10 + [(999, 10)]
     np.testing.assert_array_equal(got, expected)
     assert np.abs(got - pts).max() <= 0.005 + 1e-9
@@ -185,7 +188,7 @@ def test_read_uses_module_chunk_size(
 ) -> None:
     pts = _points(5000, seed=3)
     path = _las(tmp_path / "c.las", pts)
-    monkeypatch.setattr(ndt_io, "LAS_CHUNK_SIZE", 2000)
+    monkeypatch.setattr(formats, "LAS_CHUNK_SIZE", 2000)
     cloud = ndt_io.read(path)
     assert las_chunks == [(2000, 2000), (2000, 2000), (2000, 1000)]
     np.testing.assert_allclose(cloud.points, pts, atol=0.0005 + 1e-9, rtol=0)
@@ -421,7 +424,7 @@ def test_write_rejects_unknown_extension_and_bad_shape(tmp_path: Path) -> None:
 
 
 def test_readers_and_suffixes() -> None:
-    assert all(isinstance(r, ndt_io.PointReader) for r in ndt_io.READERS)
+    assert all(isinstance(r, formats.PointReader) for r in READERS)
     assert set(ndt_io.SUPPORTED_SUFFIXES) == {*ALL_SUFFIXES, ".e57", ".3d"}  # read-only here
     assert set(ndt_io.WRITE_SUFFIXES) == set(ALL_SUFFIXES)
 
@@ -452,7 +455,7 @@ def test_real_velodyne_pcd_drops_zero_points() -> None:
 
 def test_e57_scans_are_read_by_number_and_header_poses_reported(tmp_path: Path) -> None:
     pytest.importorskip("pye57", reason="the e57 extra is not installed")
-    from ndt_cli import e57
+    from ndt_cli.io import e57
 
     rng = np.random.default_rng(0)
     scans = [rng.uniform(-20, 20, (500, 3)), rng.uniform(-20, 20, (700, 3))]
@@ -480,7 +483,7 @@ def test_e57_scans_are_read_by_number_and_header_poses_reported(tmp_path: Path) 
 
 def test_points_are_brought_into_the_configured_scanner_frame(tmp_path):
     from ndt_cli.config import InputConfig
-    from ndt_cli.prepare import load_points
+    from ndt_cli.ndt.prepare import load_points
 
     # centimetres, x sideways, y up, z forward (a left-handed frame, as 3DTK writes)
     cm = np.array([[100.0, 50.0, 200.0], [0.0, -160.0, 100.0], [3000.0, 0.0, 3000.0]])

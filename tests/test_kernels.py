@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ndt_cli import kernels
-from ndt_cli.grid import build_map
-from ndt_cli.kernels import GRAD, HESS, SCORE, SourcePoints, evaluate, evaluate_numpy, sym3
+from ndt_cli.ndt import kernels
+from ndt_cli.ndt.grid import build_map
+from ndt_cli.ndt.kernels import GRAD, HESS, SCORE, SourcePoints, accumulate, accumulate_numpy, sym3
 
 
 def _scene(seed: int = 0, n: int = 3000) -> list[np.ndarray]:
@@ -44,8 +44,8 @@ PARAMS = np.array([[0.0, 0.0, 0.0], [0.7, -0.4, 0.05], [-1.3, 0.9, -0.12], [30.0
 
 def test_kernel_matches_numpy_twin(setup):
     ndt, src = setup
-    fast = evaluate(ndt, src, PARAMS)
-    slow = evaluate_numpy(ndt, src, PARAMS)
+    fast = accumulate(ndt, src, PARAMS)
+    slow = accumulate_numpy(ndt, src, PARAMS)
     assert fast[0, SCORE] > 10  # the aligned pose scores: the test is not vacuous
     np.testing.assert_allclose(fast, slow, rtol=1e-9, atol=1e-9)
 
@@ -57,20 +57,20 @@ def test_point_kernel_matches_twin_and_batch(setup):
     s2, J2 = kernels.point_scores_numpy(ndt, src, p)
     np.testing.assert_allclose(s, s2, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(J, J2, rtol=1e-10, atol=1e-12)
-    acc = evaluate(ndt, src, p)[0]
+    acc = accumulate(ndt, src, p)[0]
     assert acc[SCORE] == pytest.approx(s.sum(), rel=1e-12)
     np.testing.assert_allclose(acc[GRAD], -J.sum(axis=0), rtol=1e-9, atol=1e-9)
 
 
 def _f(ndt, src, p):
-    return -evaluate(ndt, src, p)[0, SCORE]
+    return -accumulate(ndt, src, p)[0, SCORE]
 
 
 @pytest.mark.parametrize("k", [1, 2])
 def test_gradient_and_hessian_match_finite_differences(setup, k):
     ndt, src = setup
     p = PARAMS[k]
-    acc = evaluate(ndt, src, p)[0]
+    acc = accumulate(ndt, src, p)[0]
     g, H = acc[GRAD], sym3(acc[HESS])
     steps = np.array([1e-6, 1e-6, 1e-8])
     g_fd = np.zeros(3)
@@ -79,8 +79,8 @@ def test_gradient_and_hessian_match_finite_differences(setup, k):
         dp = np.zeros(3)
         dp[i] = steps[i]
         g_fd[i] = (_f(ndt, src, p + dp) - _f(ndt, src, p - dp)) / (2 * steps[i])
-        a_plus = evaluate(ndt, src, p + dp)[0, GRAD]
-        a_minus = evaluate(ndt, src, p - dp)[0, GRAD]
+        a_plus = accumulate(ndt, src, p + dp)[0, GRAD]
+        a_minus = accumulate(ndt, src, p - dp)[0, GRAD]
         H_fd[:, i] = (a_plus - a_minus) / (2 * steps[i])
     np.testing.assert_allclose(g, g_fd, rtol=1e-4, atol=1e-5 * np.abs(g).max())
     np.testing.assert_allclose(H, H_fd, rtol=1e-4, atol=1e-5 * np.abs(H).max())
@@ -93,7 +93,7 @@ def test_lm_quantities_match_point_jacobian(setup):
     ndt = build_map(_scene(), 4.0, overlap=False)
     p = PARAMS[2]
     s, J = kernels.point_scores(ndt, src, p)
-    acc = evaluate(ndt, src, p)[0]
+    acc = accumulate(ndt, src, p)[0]
     np.testing.assert_allclose(sym3(acc[kernels.JTJ]), J.T @ J, rtol=1e-9)
     # residual r = 1 - s: J_r = -J, gradient of E = J_r^T r
     np.testing.assert_allclose(acc[kernels.JTR], -J.T @ (1 - s), rtol=1e-9, atol=1e-12)
@@ -107,9 +107,9 @@ def test_reduction_is_deterministic_across_threads(setup):
     before = numba.get_num_threads()
     try:
         numba.set_num_threads(1)
-        one = evaluate(ndt, src, PARAMS)
+        one = accumulate(ndt, src, PARAMS)
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
-        many = evaluate(ndt, src, PARAMS)
+        many = accumulate(ndt, src, PARAMS)
     finally:
         numba.set_num_threads(before)
     assert np.array_equal(one, many)
@@ -117,7 +117,7 @@ def test_reduction_is_deterministic_across_threads(setup):
 
 def test_points_outside_every_cell_score_zero(setup):
     ndt, src = setup
-    acc = evaluate(ndt, src, [1e4, 1e4, 0.0])[0]
+    acc = accumulate(ndt, src, [1e4, 1e4, 0.0])[0]
     assert acc[SCORE] == 0.0 and acc[kernels.MATCHED] == 0.0
     per_point_pairs = np.diff(ndt.slice_grids)[src.slice_id].sum()
     assert acc[kernels.ERR] == pytest.approx(0.5 * per_point_pairs)

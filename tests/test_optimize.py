@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from ndt_cli.config import OptimizerConfig
-from ndt_cli.grid import build_map
-from ndt_cli.kernels import SCORE, SourcePoints, evaluate
-from ndt_cli.optimize import optimize
+from ndt_cli.ndt.grid import build_map
+from ndt_cli.ndt.kernels import SCORE, SourcePoints, accumulate
+from ndt_cli.ndt.optimize import optimize
 
 
 def _room(rng: np.random.Generator) -> np.ndarray:
@@ -35,8 +35,8 @@ def test_solvers_recover_a_known_pose(method):
     p = np.zeros((1, 3))
     for cell in [4.0, 2.0, 1.0, 0.5]:
         ndt = build_map([target], cell)
-        res = optimize(lambda P, m=ndt: evaluate(m, src, P), p, cfg, cell)
-        assert res.score[0] >= evaluate(ndt, src, p)[0, SCORE]  # never worse than the start
+        res = optimize(lambda P, m=ndt: accumulate(m, src, P), p, cfg, cell)
+        assert res.score[0] >= accumulate(ndt, src, p)[0, SCORE]  # never worse than the start
         p = res.params
     assert abs(p[0, 0] - true[0]) < 0.02 and abs(p[0, 1] - true[1]) < 0.02
     assert abs(np.degrees(p[0, 2] - true[2])) < 0.05
@@ -49,9 +49,9 @@ def test_batch_starts_are_independent():
     ndt = build_map([target], 2.0)
     cfg = OptimizerConfig()
     starts = np.array([[0.5, 0.3, 0.02], [3.0, -2.0, 0.3], [-1.0, 1.0, -0.1]])
-    batch = optimize(lambda P: evaluate(ndt, src, P), starts, cfg, 2.0)
+    batch = optimize(lambda P: accumulate(ndt, src, P), starts, cfg, 2.0)
     for k in range(3):
-        single = optimize(lambda P: evaluate(ndt, src, P), starts[k : k + 1], cfg, 2.0)
+        single = optimize(lambda P: accumulate(ndt, src, P), starts[k : k + 1], cfg, 2.0)
         np.testing.assert_array_equal(single.params[0], batch.params[k])
         assert single.iterations[0] == batch.iterations[k]
 
@@ -62,7 +62,7 @@ def test_patience_and_iteration_limit():
     src = SourcePoints.from_slices([_room(rng)])
     ndt = build_map([target], 2.0)
     res = optimize(
-        lambda P: evaluate(ndt, src, P),
+        lambda P: accumulate(ndt, src, P),
         np.array([[2.0, 1.0, 0.1]]),
         OptimizerConfig(max_iterations=2, patience=50),
         2.0,

@@ -11,25 +11,36 @@ import csv
 from pathlib import Path
 
 import numpy as np
+import pytest
 from conftest import shared_data
 from typer.testing import CliRunner
 
 import ndt_cli
 from ndt_cli import config
 from ndt_cli.cli import chain_app
-from ndt_cli.transforms import read_pose_list, transform_errors
+from ndt_cli.core.transforms import transform_errors
+from ndt_cli.io.matrices import read_pose_list
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 
 
+@pytest.mark.slow
 def test_3dtk_scans_in_centimetres_and_a_left_handed_frame_chain_onto_their_reference(tmp_path):
     folder = shared_data("3dtk_example_scans")
     files = [folder / f"scan00{k}.3d" for k in range(3)]
     res = CliRunner().invoke(
         chain_app,
-        [*map(str, files), "--config", str(CONFIGS / "3dtk.yaml"), "--out", str(tmp_path),
-         "--quiet", "--jobs", "1"],
-    )  # fmt: skip
+        [
+            *map(str, files),
+            "--config",
+            str(CONFIGS / "3dtk.yaml"),
+            "--out",
+            str(tmp_path),
+            "--quiet",
+            "--jobs",
+            "1",
+        ],
+    )
     assert res.exit_code == 0, res.output
     # the reference maps scan points (cm, 3DTK's left-handed y-up frame) into scan000's frame;
     # S takes such a point into the configured frame (m, right-handed, z up)

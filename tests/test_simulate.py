@@ -5,29 +5,29 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ndt_cli import simulate
-from ndt_cli.transforms import apply
+from ndt_cli import sim
+from ndt_cli.core.transforms import apply
 
 SMALL = {"n_azimuth": 360, "n_elevation": 60}
 
 
 @pytest.fixture(scope="module")
 def street():
-    return simulate.make_street(seed=3)
+    return sim.make_street(seed=3)
 
 
 def test_same_seed_same_scan_other_seed_other_scan():
-    a = simulate.make_sequence(seed=4, n_scans=2, scan_kwargs=SMALL)
-    b = simulate.make_sequence(seed=4, n_scans=2, scan_kwargs=SMALL)
-    c = simulate.make_sequence(seed=5, n_scans=2, scan_kwargs=SMALL)
+    a = sim.make_sequence(seed=4, n_scans=2, scan_kwargs=SMALL)
+    b = sim.make_sequence(seed=4, n_scans=2, scan_kwargs=SMALL)
+    c = sim.make_sequence(seed=5, n_scans=2, scan_kwargs=SMALL)
     assert all(np.array_equal(x, y) for x, y in zip(a[1], b[1], strict=True))
     assert all(np.array_equal(x, y) for x, y in zip(a[2], b[2], strict=True))
     assert not np.array_equal(a[2][1], c[2][1])
 
 
 def test_points_are_in_the_scanner_frame(street):
-    T = simulate.scanner_pose(5.0, 1.0, 40.0, height=1.6)
-    pts = simulate.simulate_scan(street, T, **SMALL, range_noise=0.0)
+    T = sim.scanner_pose(5.0, 1.0, 40.0, height=1.6)
+    pts = sim.simulate_scan(street, T, **SMALL, range_noise=0.0)
     assert len(pts) > 1000
     world = apply(T, pts)
     on_ground = np.abs(world[:, 2]) < 0.01
@@ -37,8 +37,8 @@ def test_points_are_in_the_scanner_frame(street):
 
 
 def test_no_point_lies_inside_a_box(street):
-    T = simulate.scanner_pose(-20.0, -2.0, 10.0)
-    world = apply(T, simulate.simulate_scan(street, T, **SMALL, range_noise=0.0))
+    T = sim.scanner_pose(-20.0, -2.0, 10.0)
+    world = apply(T, sim.simulate_scan(street, T, **SMALL, range_noise=0.0))
     lo, hi = street.boxes_min, street.boxes_max
     inside = np.zeros(len(world), dtype=bool)
     for a, b in zip(lo, hi, strict=True):
@@ -47,33 +47,33 @@ def test_no_point_lies_inside_a_box(street):
 
 
 def test_range_noise_has_the_requested_spread(street):
-    T = simulate.scanner_pose(0.0, 0.0, 0.0)
-    exact = simulate.simulate_scan(street, T, **SMALL, range_noise=0.0)
-    noisy = simulate.simulate_scan(street, T, **SMALL, range_noise=0.008, seed=1)
+    T = sim.scanner_pose(0.0, 0.0, 0.0)
+    exact = sim.simulate_scan(street, T, **SMALL, range_noise=0.0)
+    noisy = sim.simulate_scan(street, T, **SMALL, range_noise=0.008, seed=1)
     dr = np.linalg.norm(noisy, axis=1) - np.linalg.norm(exact, axis=1)
     assert np.std(dr) == pytest.approx(0.008, rel=0.1)
 
 
 def test_tilt_changes_scanner_points_not_the_world(street):
-    level = simulate.scanner_pose(0.0, 0.0, 0.0)
-    tilted = simulate.scanner_pose(0.0, 0.0, 0.0, roll_deg=0.5, pitch_deg=-0.4)
-    w_level = apply(level, simulate.simulate_scan(street, level, **SMALL, range_noise=0.0))
-    pts_tilted = simulate.simulate_scan(street, tilted, **SMALL, range_noise=0.0)
+    level = sim.scanner_pose(0.0, 0.0, 0.0)
+    tilted = sim.scanner_pose(0.0, 0.0, 0.0, roll_deg=0.5, pitch_deg=-0.4)
+    w_level = apply(level, sim.simulate_scan(street, level, **SMALL, range_noise=0.0))
+    pts_tilted = sim.simulate_scan(street, tilted, **SMALL, range_noise=0.0)
     w_tilted = apply(tilted, pts_tilted)
     ground_scan = pts_tilted[np.abs(w_tilted[:, 2]) < 0.01]
     # in the tilted scanner frame the ground is a tilted plane; in the world it is flat
-    slope = np.linalg.lstsq(np.c_[ground_scan[:, :2], np.ones(len(ground_scan))],
-                            ground_scan[:, 2], rcond=None)[0][:2]  # fmt: skip
+    slope = np.linalg.lstsq(
+        np.c_[ground_scan[:, :2], np.ones(len(ground_scan))], ground_scan[:, 2], rcond=None
+    )[0][:2]
     assert np.degrees(np.abs(slope)).max() > 0.3
     assert np.abs(w_tilted[np.abs(w_tilted[:, 2]) < 0.05, 2]).max() < 0.05
     assert np.abs(np.median(w_level[:, 2]) - np.median(w_tilted[:, 2])) < 0.5
 
 
 def test_corridor_facades_have_no_gaps():
-    scene = simulate.make_street(seed=1, corridor=True)
-    T = simulate.scanner_pose(0.0, 0.0, 0.0)
-    world = apply(T, simulate.simulate_scan(scene, T, n_azimuth=720, n_elevation=40,
-                                            range_noise=0.0))  # fmt: skip
+    scene = sim.make_street(seed=1, corridor=True)
+    T = sim.scanner_pose(0.0, 0.0, 0.0)
+    world = apply(T, sim.simulate_scan(scene, T, n_azimuth=720, n_elevation=40, range_noise=0.0))
     level = world[np.abs(world[:, 2] - 2.0) < 0.3]
     for side in (1, -1):
         wall = level[np.sign(level[:, 1]) == side]
@@ -83,18 +83,18 @@ def test_corridor_facades_have_no_gaps():
 
 
 def test_scene_is_deterministic_in_its_seed():
-    assert simulate.make_street(seed=3) == simulate.make_street(seed=3)
-    assert simulate.make_street(seed=3) != simulate.make_street(seed=4)
-    assert simulate.make_street(seed=3, corridor=True) == simulate.make_street(3, corridor=True)
-    a, b = simulate.make_street(seed=3), simulate.make_street(seed=4)
+    assert sim.make_street(seed=3) == sim.make_street(seed=3)
+    assert sim.make_street(seed=3) != sim.make_street(seed=4)
+    assert sim.make_street(seed=3, corridor=True) == sim.make_street(3, corridor=True)
+    a, b = sim.make_street(seed=3), sim.make_street(seed=4)
     assert not np.array_equal(a.boxes_min[:10], b.boxes_min[:10])
 
 
 def test_noise_seed_changes_the_points_and_only_the_noise(street):
-    T = simulate.scanner_pose(2.0, -1.0, 15.0)
-    a = simulate.simulate_scan(street, T, **SMALL, seed=1)
-    b = simulate.simulate_scan(street, T, **SMALL, seed=1)
-    c = simulate.simulate_scan(street, T, **SMALL, seed=2)
+    T = sim.scanner_pose(2.0, -1.0, 15.0)
+    a = sim.simulate_scan(street, T, **SMALL, seed=1)
+    b = sim.simulate_scan(street, T, **SMALL, seed=1)
+    c = sim.simulate_scan(street, T, **SMALL, seed=2)
     assert np.array_equal(a, b)
     assert a.shape == c.shape and not np.array_equal(a, c)
     # same rays: the directions agree, only the ranges differ (by the noise)
@@ -104,8 +104,8 @@ def test_noise_seed_changes_the_points_and_only_the_noise(street):
 
 
 def test_scan_sees_facades_between_4_and_12_m(street):
-    T = simulate.scanner_pose(-5.0, 0.5, 70.0)
-    world = apply(T, simulate.simulate_scan(street, T, **SMALL))
+    T = sim.scanner_pose(-5.0, 0.5, 70.0)
+    world = apply(T, sim.simulate_scan(street, T, **SMALL))
     high = world[(world[:, 2] > 4.0) & (world[:, 2] < 12.0)]
     assert len(high) > 500
     # they are facades: at or behind the facade lines y = +-9 m (protrusions up to 0.6 m)
@@ -116,38 +116,39 @@ def test_scan_sees_facades_between_4_and_12_m(street):
 def test_occluder_casts_a_shadow_on_the_wall_behind_it():
     wall = ([20.0, -30.0, 0.0], [21.0, 30.0, 15.0])
     post = ([5.0, -1.0, 0.0], [6.0, 1.0, 3.0])
-    T = simulate.scanner_pose(0.0, 0.0, 0.0)
+    T = sim.scanner_pose(0.0, 0.0, 0.0)
     kw = {"n_azimuth": 720, "n_elevation": 120, "range_noise": 0.0}
-    open_scene = simulate.Scene(np.array([wall[0]]), np.array([wall[1]]), np.zeros((0, 5)))
-    blocked = simulate.Scene(np.array([wall[0], post[0]]), np.array([wall[1], post[1]]),
-                             np.zeros((0, 5)))  # fmt: skip
+    open_scene = sim.Scene(np.array([wall[0]]), np.array([wall[1]]), np.zeros((0, 5)))
+    blocked = sim.Scene(
+        np.array([wall[0], post[0]]), np.array([wall[1], post[1]]), np.zeros((0, 5))
+    )
 
     def shadow_region(points: np.ndarray) -> np.ndarray:
         on_wall = np.abs(points[:, 0] - 20.0) < 1e-6
         return on_wall & (np.abs(points[:, 1]) < 3.0) & (points[:, 2] > 2.0) & (points[:, 2] < 6.0)
 
-    assert shadow_region(apply(T, simulate.simulate_scan(open_scene, T, **kw))).sum() > 50
-    seen = apply(T, simulate.simulate_scan(blocked, T, **kw))
+    assert shadow_region(apply(T, sim.simulate_scan(open_scene, T, **kw))).sum() > 50
+    seen = apply(T, sim.simulate_scan(blocked, T, **kw))
     assert not shadow_region(seen).any()
     assert (np.abs(seen[:, 0] - 5.0) < 1e-6).sum() > 50  # the post's front face is seen instead
 
 
 def test_tilted_scan_points_lie_on_the_scene_surfaces(street):
     eps = 1e-6
-    tilted = simulate.scanner_pose(8.0, 1.0, -30.0, roll_deg=3.0, pitch_deg=-2.0)
-    pts = simulate.simulate_scan(street, tilted, **SMALL, range_noise=0.0)
+    tilted = sim.scanner_pose(8.0, 1.0, -30.0, roll_deg=3.0, pitch_deg=-2.0)
+    pts = sim.simulate_scan(street, tilted, **SMALL, range_noise=0.0)
 
     def on_surface(world: np.ndarray) -> np.ndarray:
         near = (np.abs(world[:, 2]) < eps) | street.contains(world, margin=-eps)
         return near & ~street.contains(world, margin=eps)
 
     assert on_surface(apply(tilted, pts)).all()
-    level = simulate.scanner_pose(8.0, 1.0, -30.0)  # ignoring the tilt misplaces the points
+    level = sim.scanner_pose(8.0, 1.0, -30.0)  # ignoring the tilt misplaces the points
     assert on_surface(apply(level, pts)).mean() < 0.5
 
 
 def test_corridor_is_gapless_and_uniform_but_the_street_has_gaps():
-    def facade_coverage_holes(scene: simulate.Scene, side: int, x_lo: float, x_hi: float) -> float:
+    def facade_coverage_holes(scene: sim.Scene, side: int, x_lo: float, x_hi: float) -> float:
         lo, hi = scene.boxes_min, scene.boxes_max
         front = (side * lo[:, 1] > 8.0) if side > 0 else (side * hi[:, 1] > 8.0)
         tall = hi[:, 2] > 5.0
@@ -156,8 +157,8 @@ def test_corridor_is_gapless_and_uniform_but_the_street_has_gaps():
         covered = ((xs[:, None] >= spans[:, 0]) & (xs[:, None] <= spans[:, 1])).any(axis=1)
         return float((~covered).mean())
 
-    corridor = simulate.make_street(seed=2, corridor=True)
-    street = simulate.make_street(seed=2)
+    corridor = sim.make_street(seed=2, corridor=True)
+    street = sim.make_street(seed=2)
     for side in (1, -1):
         assert facade_coverage_holes(corridor, side, -250.0, 250.0) == 0.0
     assert max(facade_coverage_holes(street, s, -130.0, 130.0) for s in (1, -1)) > 0.02
@@ -167,7 +168,7 @@ def test_corridor_is_gapless_and_uniform_but_the_street_has_gaps():
 
 
 def test_sequence_standpoints_follow_the_street():
-    scene, scans, poses = simulate.make_sequence(
+    scene, scans, poses = sim.make_sequence(
         seed=11, n_scans=4, tilt_deg=2.0, scan_kwargs={"n_azimuth": 90, "n_elevation": 20}
     )
     assert len(scans) == len(poses) == 4
@@ -185,8 +186,8 @@ def test_sequence_standpoints_follow_the_street():
 
 
 def test_default_scan_density_and_range(street):
-    T = simulate.scanner_pose(0.0, 0.0, 0.0)
-    pts = simulate.simulate_scan(street, T)
+    T = sim.scanner_pose(0.0, 0.0, 0.0)
+    pts = sim.simulate_scan(street, T)
     assert 100_000 <= len(pts) <= 300_000
     assert np.linalg.norm(pts, axis=1).max() < 120.0 + 0.1
 
@@ -194,5 +195,4 @@ def test_default_scan_density_and_range(street):
 def test_scanner_inside_an_object_is_refused(street):
     centre = 0.5 * (street.boxes_min[0] + street.boxes_max[0])
     with pytest.raises(ValueError, match="inside"):
-        simulate.simulate_scan(street, simulate.scanner_pose(*centre[:2], 0.0, height=centre[2]),
-                               **SMALL)  # fmt: skip
+        sim.simulate_scan(street, sim.scanner_pose(*centre[:2], 0.0, height=centre[2]), **SMALL)

@@ -11,7 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ndt_cli.transforms import read_matrix, read_pose_list, transform_errors, yaw_of
+from ndt_cli.core.transforms import transform_errors, yaw_of
+from ndt_cli.io.matrices import read_matrix, read_pose_list
 
 
 def _line(label: str, T: np.ndarray, T_ref: np.ndarray) -> str:

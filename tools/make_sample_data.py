@@ -17,10 +17,12 @@ from pathlib import Path
 import numpy as np
 
 try:
-    from ndt_cli import atomic, io, simulate
+    from ndt_cli import io, sim
+    from ndt_cli.io import atomic
 except ImportError:  # run from a checkout without an installed package
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from ndt_cli import atomic, io, simulate
+    from ndt_cli import io, sim
+    from ndt_cli.io import atomic
 
 POSES_NAME = "poses_T_world_scan.txt"
 
@@ -71,7 +73,7 @@ def readme_text(
     return f"""# Sample data: simulated terrestrial laser scans of a street
 
 Synthetic data, no real measurements: {len(scans)} static terrestrial laser scans of one street,
-made by the deterministic ray-casting simulator `ndt_cli/simulate.py`. The street runs along
+made by the deterministic ray-casting simulator `ndt_cli/sim.py`. The street runs along
 the world x axis with buildings on both sides (blocks 8-30 m wide, 6-25 m high, with depth,
 gaps and side streets, facade relief of 0.1-0.6 m: window and door niches, balconies,
 pilasters, cornices), parked cars, lamp posts, sign posts and tree trunks on a flat ground
@@ -117,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--n-scans", type=int, default=5)
     ap.add_argument("--tilt-deg", type=float, default=0.0, help="max roll/pitch of the scanner")
     args = ap.parse_args(argv)
-    _, scans, poses = simulate.make_sequence(
+    _, scans, poses = sim.make_sequence(
         seed=args.seed, n_scans=args.n_scans, tilt_deg=args.tilt_deg
     )
     names = [f"scan_{k:02d}.laz" for k in range(len(scans))]

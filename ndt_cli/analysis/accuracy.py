@@ -1,0 +1,128 @@
+"""Accuracy of ndt-register / ndt-chain results against reference poses.
+
+Ground truth is either a pose list (``name`` + 16 numbers of T_world_scan per line) or a pair
+list (``target source`` + 16 numbers of T_target_source per line). Errors are those of each
+link's T_target_source: rotation angle (degrees) and translation (metres) of the difference.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ndt_cli.core.transforms import transform_errors
+from ndt_cli.errors import InputError, read_user_text
+from ndt_cli.io.matrices import named_rows, read_matrix, read_pose_list
+from ndt_cli.pipeline.scans import link_file_name
+
+DEFAULT_THRESHOLDS = ((2.0, 0.10), (0.1, 0.02))  # (degrees, metres)
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Per-link errors, success rates per threshold and the end-of-chain drift."""
+
+    links: list[dict[str, Any]]
+    success: list[dict[str, Any]]
+    drift: dict[str, Any] | None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"links": self.links, "success": self.success, "drift": self.drift}
+
+
+def read_reference(
+    path: str | Path,
+) -> tuple[dict[str, np.ndarray], dict[tuple[str, str], np.ndarray]]:
+    """(poses by scan name, relative transforms by (target, source)) from a reference file."""
+    p = Path(path)
+    poses: dict[str, np.ndarray] = {}
+    pairs: dict[tuple[str, str], np.ndarray] = {}
+    for n, fields in named_rows(p, "reference"):
+        try:
+            if len(fields) == 17:
+                poses[fields[0]] = np.array(fields[1:], dtype=float).reshape(4, 4)
+            elif len(fields) == 18:
+                pairs[(fields[0], fields[1])] = np.array(fields[2:], dtype=float).reshape(4, 4)
+            else:
+                raise ValueError
+        except ValueError:
+            raise InputError(
+                f"line {n}: expected 'name' or 'target source', then 16 numbers", p
+            ) from None
+    return poses, pairs
+
+
+def _links_of(result_dir: Path) -> tuple[list[tuple[str, str, np.ndarray]], dict[str, np.ndarray]]:
+    """Links (target, source, T) and chained poses of an ndt-chain or ndt-register folder."""
+    pairs_csv = result_dir / "pairs.csv"
+    if pairs_csv.exists():
+        links = []
+        with open(pairs_csv, encoding="utf-8") as fh:
+            for row in csv.DictReader(fh):
+                f = result_dir / link_file_name(row["target"], row["source"])
+                if f.exists():
+                    links.append((row["target"], row["source"], read_matrix(f)))
+        poses_txt = result_dir / "poses.txt"
+        poses = read_pose_list(poses_txt) if poses_txt.exists() else {}
+        return links, poses
+    single = result_dir / "T_target_source.txt"
+    if single.exists():
+        meta = json.loads(read_user_text(result_dir / "result.json", "result"))
+        names = [Path(meta["target"]).name, Path(meta["source"]).name]
+        return [(names[0], names[1], read_matrix(single))], {}
+    raise InputError(
+        "no ndt-chain (pairs.csv) or ndt-register (T_target_source.txt) results", result_dir
+    )
+
+
+Thresholds = tuple[tuple[float, float], ...]
+
+
+def compare_with_reference(
+    result_dir: str | Path, reference: str | Path, thresholds: Thresholds = DEFAULT_THRESHOLDS
+) -> Evaluation:
+    """Compare every link (and the chained poses) of ``result_dir`` with ``reference``."""
+    links, est_poses = _links_of(Path(result_dir))
+    ref_poses, ref_pairs = read_reference(reference)
+    rows = []
+    for target, source, T in links:
+        if (target, source) in ref_pairs:
+            T_ref = ref_pairs[(target, source)]
+        elif target in ref_poses and source in ref_poses:
+            T_ref = np.linalg.inv(ref_poses[target]) @ ref_poses[source]
+        else:
+            continue
+        rot, trans = transform_errors(T, T_ref)
+        rows.append(
+            {
+                "target": target,
+                "source": source,
+                "rotation_error_deg": rot,
+                "translation_error_m": trans,
+            }
+        )
+    if not rows:
+        raise InputError(
+            "no link of the results has a reference pose (check the scan names)", reference
+        )
+    success = []
+    for r, t in thresholds:
+        ok = [x["rotation_error_deg"] <= r and x["translation_error_m"] <= t for x in rows]
+        success.append(
+            {"max_rotation_deg": r, "max_translation_m": t, "success_rate": float(np.mean(ok))}
+        )
+    drift = None
+    named = [n for n in est_poses if n in ref_poses]
+    if len(named) >= 2:
+        first, last = named[0], named[-1]
+        world = np.linalg.inv(ref_poses[first])
+        T_ref = world @ ref_poses[last]
+        T_est = np.linalg.inv(est_poses[first]) @ est_poses[last]
+        rot, trans = transform_errors(T_est, T_ref)
+        drift = {"from": first, "to": last, "rotation_error_deg": rot, "translation_error_m": trans}
+    return Evaluation(rows, success, drift)

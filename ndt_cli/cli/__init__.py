@@ -1,0 +1,12 @@
+"""Command-line entry points, one Typer app per command. They parse options and call the library.
+
+Exit codes: 0 success, 1 registration failed or not trustworthy, 2 bad input or config, 130
+stopped by Ctrl-C. Heavy modules are imported inside the commands so that ``--help`` stays fast.
+"""
+
+from ndt_cli.cli.analyze import analyze_app
+from ndt_cli.cli.chain import chain_app
+from ndt_cli.cli.evaluate import eval_app
+from ndt_cli.cli.register import register_app
+
+__all__ = ["analyze_app", "chain_app", "eval_app", "register_app"]

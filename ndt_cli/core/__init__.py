@@ -1,0 +1,1 @@
+"""Geometry shared by every layer: rigid transforms, voxel thinning, normals (no I/O)."""

@@ -1,0 +1,148 @@
+"""One reader per point-file format, all behind the same interface.
+
+Every reader tells the point count its header announces (``None`` when the format has no
+header count), and yields the raw coordinates in chunks of at most ``chunk_size`` points:
+LAS/LAZ stream from the file, the other formats come as one chunk. Coordinates are the file's
+own (metres unless the file says otherwise), float64, before any filtering.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import laspy
+import numpy as np
+import plyfile
+import pypcd4
+
+from ndt_cli.errors import InputError
+
+LAS_CHUNK_SIZE = 2_000_000
+"""Points per chunk when reading LAS/LAZ (bounds the memory used by laspy's point records)."""
+
+
+class PointReader:
+    """Reads the raw coordinates of one file format (see the module docstring)."""
+
+    suffixes: tuple[str, ...] = ()
+
+    def count(self, path: Path) -> int | None:
+        """Points the header announces, or None for formats without a header count."""
+        return None
+
+    def iter_xyz(self, path: Path, chunk_size: int | None = None) -> Iterator[np.ndarray]:
+        """Raw (m,3) float64 chunks in file order (one chunk unless the format streams)."""
+        yield np.asarray(self.read_xyz(path), dtype=np.float64).reshape(-1, 3)
+
+    def read_xyz(self, path: Path) -> np.ndarray:
+        """All points of ``path`` as raw (N,3) float64, before any filtering."""
+        raise NotImplementedError
+
+
+class PlyReader(PointReader):
+    """PLY (ascii, binary little or big endian): ``vertex`` element, x/y/z of any numeric type."""
+
+    suffixes = (".ply",)
+
+    def read_xyz(self, path: Path) -> np.ndarray:
+        ply = plyfile.PlyData.read(str(path))
+        names = [element.name for element in ply.elements]
+        if "vertex" not in names:
+            raise InputError(f"PLY file has no 'vertex' element (elements: {names})", path)
+        vertex = ply["vertex"].data
+        require_xyz(vertex.dtype.names or (), path)
+        return stack_xyz(vertex)
+
+
+class LasReader(PointReader):
+    """LAS/LAZ via laspy (lazrs for LAZ): scaled x/y/z, streamed ``chunk_size`` points at a time."""
+
+    suffixes = (".las", ".laz")
+
+    def count(self, path: Path) -> int:
+        with laspy.open(path) as reader:
+            return int(reader.header.point_count)
+
+    def iter_xyz(self, path: Path, chunk_size: int | None = None) -> Iterator[np.ndarray]:
+        with laspy.open(path) as reader:
+            header = reader.header
+            n = int(header.point_count)
+            _check_las_size(header, path)
+            filled = 0
+            for chunk in reader.chunk_iterator(chunk_size or LAS_CHUNK_SIZE):
+                m = len(chunk)
+                if filled + m > n:
+                    raise InputError(f"file holds more points than its header's {n}", path)
+                out = np.empty((m, 3), dtype=np.float64)
+                out[:, 0], out[:, 1], out[:, 2] = chunk.x, chunk.y, chunk.z
+                filled += m
+                yield out
+        if filled != n:
+            raise InputError(f"truncated file: header announces {n} points, found {filled}", path)
+
+    def read_xyz(self, path: Path) -> np.ndarray:
+        chunks = list(self.iter_xyz(path))
+        return np.concatenate(chunks) if chunks else np.empty((0, 3))
+
+
+def _check_las_size(header: laspy.LasHeader, path: Path) -> None:
+    """An uncompressed LAS file must hold the bytes of every point its header announces."""
+    if header.are_points_compressed:
+        return
+    n = int(header.point_count)
+    needed = header.offset_to_point_data + n * header.point_format.size
+    size = path.stat().st_size
+    if size < needed:
+        raise InputError(
+            f"truncated LAS file: header announces {n} points ({needed} bytes), "
+            f"file has {size} bytes",
+            path,
+        )
+
+
+class PcdReader(PointReader):
+    """PCD (ascii, binary, binary_compressed) via pypcd4: fields x, y, z."""
+
+    suffixes = (".pcd",)
+
+    def read_xyz(self, path: Path) -> np.ndarray:
+        with path.open("rb") as fh:
+            head = fh.read(16384)
+        if b"FIELDS" not in head or b"DATA" not in head:
+            raise InputError("not a PCD file (no FIELDS/DATA header)", path)
+        cloud = pypcd4.PointCloud.from_path(path)
+        require_xyz(cloud.fields, path)
+        data = np.atleast_1d(cloud.pc_data)
+        if len(data) != cloud.metadata.points:
+            raise InputError(
+                f"truncated file: header announces {cloud.metadata.points} points, "
+                f"found {len(data)}",
+                path,
+            )
+        return stack_xyz(data)
+
+
+class E57Reader(PointReader):
+    """E57 scans (optional pye57); ``FILE.e57#K`` names scan K, see :mod:`ndt_cli.io.e57`."""
+
+    suffixes = (".e57",)
+
+    def read_xyz(self, path: Path) -> np.ndarray:
+        from ndt_cli.io import e57
+
+        return e57.read_xyz(path)
+
+
+def require_xyz(names: tuple[str, ...] | list[str], path: Path) -> None:
+    """Raise unless the record field ``names`` include x, y and z."""
+    if not {"x", "y", "z"} <= set(names):
+        raise InputError(f"no x, y, z fields (found: {', '.join(names) or 'none'})", path)
+
+
+def stack_xyz(data: np.ndarray) -> np.ndarray:
+    """(N,3) float64 of the x, y, z fields of a structured array."""
+    out = np.empty((len(data), 3), dtype=np.float64)
+    for i, name in enumerate("xyz"):
+        out[:, i] = data[name]
+    return out

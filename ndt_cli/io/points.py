@@ -1,0 +1,181 @@
+"""Reading point clouds: the format is chosen by extension, failures become one-line errors.
+
+Coordinates are kept exactly as the file stores them (the file's own frame, metres unless the
+file says otherwise), as float64. Non-finite points and exact (0,0,0) points ("no return" points
+of spinning LiDARs) are dropped, and every failure is an :class:`~ndt_cli.errors.InputError`
+naming the file.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ndt_cli.errors import InputError, NdtError
+from ndt_cli.io.formats import E57Reader, LasReader, PcdReader, PlyReader, PointReader
+from ndt_cli.io.text import TextReader
+
+logger = logging.getLogger(__name__)
+
+READERS: tuple[PointReader, ...] = (
+    PlyReader(),
+    LasReader(),
+    PcdReader(),
+    TextReader(),
+    E57Reader(),
+)
+SUPPORTED_SUFFIXES: tuple[str, ...] = tuple(s for r in READERS for s in r.suffixes)
+
+
+@dataclass(frozen=True)
+class PointCloud:
+    """Points read from one file, after dropping unusable points.
+
+    ``points`` is (N,3) float64, finite, without exact (0,0,0) rows, in the file's own
+    coordinates (metres unless the file says otherwise). ``n_read`` counts the points in the file;
+    ``n_nonfinite`` (NaN/inf in any coordinate) and ``n_zero`` (exactly (0,0,0)) were dropped.
+    """
+
+    points: np.ndarray
+    path: Path | None
+    n_read: int
+    n_nonfinite: int
+    n_zero: int
+
+
+def unusable(raw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Masks of the (N,3) rows that are not finite, and of those that are exactly (0,0,0).
+
+    Column-wise, which is fast on (N,3) arrays; a usable row is in neither mask.
+    """
+    nonfinite = ~np.isfinite(raw[:, 0] + raw[:, 1] + raw[:, 2])
+    zero = (raw[:, 0] == 0.0) & (raw[:, 1] == 0.0) & (raw[:, 2] == 0.0)
+    return nonfinite, zero
+
+
+def as_points(array: object) -> np.ndarray:
+    """An array the user passed as points, as (N,3) float64; anything else is an InputError
+    that says what is expected."""
+    expected = "an (N,3) array of real x, y, z coordinates in metres"
+    a = np.asarray(array) if not isinstance(array, np.ndarray) else array
+    if a.dtype.names is not None or a.dtype == object:
+        raise InputError(f"expected {expected}, got an array of {a.dtype}")
+    if a.dtype.kind not in "iuf":
+        raise InputError(f"expected {expected}, got {a.dtype} values")
+    if a.ndim != 2 or a.shape[1] != 3:
+        hint = " (transpose it: points are rows)" if a.ndim == 2 and a.shape[0] == 3 else ""
+        raise InputError(f"expected {expected}, got shape {a.shape}{hint}")
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def reader_for(path: Path) -> PointReader:
+    """The reader of a file's extension."""
+    suffix = path.suffix.lower()
+    for reader in READERS:
+        if suffix in reader.suffixes:
+            return reader
+    raise InputError(
+        f"unknown extension {path.suffix or '(none)'!r}; supported: {' '.join(SUPPORTED_SUFFIXES)}",
+        path,
+    )
+
+
+def _open(path: str | Path) -> tuple[Path, PointReader]:
+    """The path and its reader, after the checks every format shares."""
+    from ndt_cli.io.e57 import split_spec
+
+    p = Path(path)
+    f = split_spec(p)[0]  # 'scans.e57#3' names scan 3 of scans.e57
+    if not f.exists():
+        raise InputError("file not found", p)
+    if f.is_dir():
+        raise InputError("is a directory, not a point file", p)
+    reader = reader_for(f)
+    try:
+        empty = f.stat().st_size == 0
+    except OSError as exc:
+        raise InputError(f"cannot read ({exc.strerror or one_line(exc)})", p) from exc
+    if empty:
+        raise InputError("file is empty", p)
+    return p, reader
+
+
+def one_line(exc: BaseException, limit: int = 160) -> str:
+    """An exception's text on one line, at most ``limit`` characters."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+@contextmanager
+def _file_errors(p: Path) -> Iterator[None]:
+    """Turn any library failure while reading ``p`` into a one-line :class:`InputError`."""
+    try:
+        yield
+    except NdtError:
+        raise
+    except OSError as exc:
+        raise InputError(f"cannot read ({exc.strerror or one_line(exc)})", p) from exc
+    except Exception as exc:  # any library failure is a problem with the file
+        raise InputError(f"not a valid or complete {p.suffix} file: {one_line(exc)}", p) from exc
+
+
+def count(path: str | Path) -> int | None:
+    """Points a file announces in its header (LAS/LAZ), or None for formats without a count."""
+    p, reader = _open(path)
+    with _file_errors(p):
+        return reader.count(p)
+
+
+def read_chunks(path: str | Path, chunk_size: int | None = None) -> Iterator[np.ndarray]:
+    """The usable points of a file as (m,3) float64 chunks in file order: LAS/LAZ are streamed
+    ``chunk_size`` points at a time (memory stays bounded), other formats come as one chunk.
+    Non-finite and (0,0,0) points are dropped; errors as in :func:`read`."""
+    p, reader = _open(path)
+    n_read = n_kept = 0
+    with _file_errors(p):
+        for raw in reader.iter_xyz(p, chunk_size):
+            nonfinite, zero = unusable(raw)
+            keep = ~(nonfinite | zero)
+            n_read += len(raw)
+            n_kept += int(keep.sum())
+            if keep.any():
+                yield raw if keep.all() else raw[keep]
+    if n_read == 0:
+        raise InputError("no points in file", p)
+    if n_kept == 0:
+        raise InputError(f"no usable points: all {n_read} are NaN/inf or (0,0,0)", p)
+
+
+def read(path: str | Path) -> PointCloud:
+    """Read a point file (format chosen by extension) and drop non-finite and (0,0,0) points.
+
+    Raises :class:`InputError` (one line, naming the file) for anything wrong with the file.
+    """
+    p, reader = _open(path)
+    with _file_errors(p):
+        raw = np.asarray(reader.read_xyz(p), dtype=np.float64).reshape(-1, 3)
+    n_read = len(raw)
+    if n_read == 0:
+        raise InputError("no points in file", p)
+    nonfinite, zero = unusable(raw)
+    keep = ~(nonfinite | zero)
+    n_nonfinite, n_zero = int(nonfinite.sum()), int(zero.sum())
+    if not keep.any():
+        raise InputError(
+            f"no usable points: of {n_read}, {n_nonfinite} are NaN/inf and {n_zero} are (0,0,0)", p
+        )
+    logger.log(
+        logging.INFO if n_nonfinite or n_zero else logging.DEBUG,
+        "%s: read %d points, dropped %d non-finite and %d (0,0,0) points",
+        p,
+        n_read,
+        n_nonfinite,
+        n_zero,
+    )
+    points = raw if keep.all() else raw[keep]
+    return PointCloud(np.ascontiguousarray(points), p, n_read, n_nonfinite, n_zero)

@@ -1,0 +1,41 @@
+"""The compiled pieces of the method, swappable as one: Numba kernels or their numpy twins.
+
+Every Numba kernel has a plain-numpy twin that computes the same thing (the tests compare them
+at 1e-9). :data:`NUMPY` runs a whole registration on the twins: slow, but independent of the
+compiler, and what a test holds the Numba path against end to end.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ndt_cli.ndt import kernels, passes
+from ndt_cli.ndt.grid import NDTMap
+from ndt_cli.ndt.kernels import SourcePoints
+
+
+@dataclass(frozen=True)
+class Kernels:
+    """One implementation of every kernel the registration calls."""
+
+    name: str
+    accumulate: Callable[[NDTMap, SourcePoints, np.ndarray, bool], np.ndarray]
+    point_scores: Callable[[NDTMap, SourcePoints, np.ndarray], tuple[np.ndarray, np.ndarray]]
+    bounds: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+    slice_pass: Callable[..., tuple]
+
+    def __repr__(self) -> str:
+        return f"Kernels({self.name})"
+
+
+NUMBA = Kernels("numba", kernels.accumulate, kernels.point_scores, passes.bounds, passes.slice_pass)
+NUMPY = Kernels(
+    "numpy",
+    kernels.accumulate_numpy,
+    kernels.point_scores_numpy,
+    passes.bounds_numpy,
+    passes.slice_pass_numpy,
+)

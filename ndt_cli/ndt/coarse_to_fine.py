@@ -1,0 +1,121 @@
+"""Coarse to fine: every candidate refined through the finer cell sizes, then the winner chosen.
+
+Each finer level restarts every candidate from its previous solution and from a 5 x 5 grid of
++-1/2 and +-1 cell offsets, and keeps its best. Over the three finest levels each candidate
+collects evidence: its score times its mean score per matched point, relative to the best
+candidate. The candidate with the most evidence wins; the second-best distinct one's share is
+the ambiguity that the quality gate checks.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ndt_cli.config.schema import OptimizerConfig
+from ndt_cli.core.transforms import wrap_angle
+from ndt_cli.ndt.backend import Kernels
+from ndt_cli.ndt.kernels import MATCHED, SCORE
+from ndt_cli.ndt.levels import SourceSampler, TargetMaps, level_stats, run_level
+from ndt_cli.ndt.result import Candidate, LevelStats
+from ndt_cli.ndt.search import distinct_indices
+
+EVIDENCE_LEVELS = 3  # finest levels whose fit-weighted scores decide between candidates
+
+
+def restart_offsets(cell: float, enabled: bool) -> np.ndarray:
+    """Restart offsets of a finer level: a 5 x 5 grid of +-1 and +-1/2 cells in x and y. (Only
+    +-1/2 cell saves a quarter of the time, but let a link of two scans 30 m apart slide 4.6 m.)"""
+    if not enabled:
+        return np.zeros((1, 3))
+    steps = cell * np.array([0.0, -0.5, 0.5, -1.0, 1.0])
+    ox, oy = np.meshgrid(steps, steps, indexing="ij")
+    return np.column_stack([ox.ravel(), oy.ravel(), np.zeros(ox.size)])
+
+
+def fit_weighted(acc: np.ndarray) -> np.ndarray:
+    """Per candidate: score times mean score per matched point, relative to the best candidate.
+
+    A pose slid along a street or turned by 180 degrees can put more points into cells (a
+    higher score) while fitting them worse; weighting the score by the fit of the matched points
+    prefers the true pose. Summed over the finest levels this picked the true pose on 60 of 60
+    simulated street links, against 59 for the plain score.
+    """
+    w = acc[:, SCORE] ** 2 / np.maximum(acc[:, MATCHED], 1.0)
+    return w / max(w.max(), 1e-300)
+
+
+@dataclass(frozen=True)
+class Refined:
+    """Candidates (K,3) after the finest level, their final scores and summed evidence, the
+    level records and whether the winner of the finest level converged."""
+
+    candidates: np.ndarray
+    scores: np.ndarray
+    evidence: np.ndarray
+    levels: tuple[LevelStats, ...]
+    converged: bool
+
+
+def coarse_to_fine(
+    candidates: np.ndarray,
+    schedule: Sequence[float],
+    maps: TargetMaps,
+    sampler: SourceSampler,
+    optimizer: OptimizerConfig,
+    restarts: bool,
+    kernels: Kernels,
+) -> Refined:
+    """Refine every candidate pose through the cell sizes of ``schedule`` (coarse to fine)."""
+    cands = candidates
+    scores, evidence = np.zeros(len(cands)), np.zeros(len(cands))
+    levels: list[LevelStats] = []
+    converged = False
+    for k, cell in enumerate(schedule):
+        t0 = time.perf_counter()
+        off = restart_offsets(cell, restarts)
+        starts = (cands[:, None, :] + off[None, :, :]).reshape(-1, 3)
+        pts = sampler.at(cell)
+        res = run_level(maps(cell), pts, starts, optimizer, kernels)
+        pick = np.argmax(res.score.reshape(len(cands), len(off)), axis=1)
+        flat = np.arange(len(cands)) * len(off) + pick
+        cands, scores = res.params[flat], res.score[flat]
+        if k >= len(schedule) - EVIDENCE_LEVELS:
+            evidence += fit_weighted(kernels.accumulate(maps(cell), pts, cands, True))
+        w = flat[int(np.argmax(scores))]
+        converged = bool(res.converged[w])
+        levels.append(level_stats(cell, res, w, len(starts), len(pts), t0))
+    return Refined(cands, scores, evidence, tuple(levels), converged)
+
+
+@dataclass(frozen=True)
+class Ranked:
+    """Distinct candidates, best evidence first: poses (K,3), scores, evidence."""
+
+    poses: np.ndarray
+    scores: np.ndarray
+    evidence: np.ndarray
+
+    @property
+    def ambiguity(self) -> float:
+        """Evidence of the second distinct candidate over the best's (0 when alone)."""
+        e = self.evidence
+        return float(e[1] / e[0]) if len(e) > 1 and e[0] > 0 else 0.0
+
+    def records(self) -> tuple[Candidate, ...]:
+        return tuple(
+            Candidate(
+                float(c[0]), float(c[1]), float(np.degrees(wrap_angle(c[2]))), float(s), float(e)
+            )
+            for c, s, e in zip(self.poses, self.scores, self.evidence, strict=True)
+        )
+
+
+def rank(refined: Refined, finest_cell: float) -> Ranked:
+    """The candidates by evidence; those that converged onto the same pose count once."""
+    n = len(refined.candidates)
+    order = distinct_indices(refined.candidates, refined.evidence, n, finest_cell)
+    return Ranked(refined.candidates[order], refined.scores[order], refined.evidence[order])

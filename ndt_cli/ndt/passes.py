@@ -1,0 +1,149 @@
+"""One pass over the points of a chunk (Numba), with plain-numpy twins that the tests compare.
+
+A scan of millions of points is touched twice while it is prepared: once for its bounding box,
+and once to cut the slices and thin the points for ICP. Both are fused here into single loops;
+everything else works on the much smaller results. Coordinates are metres.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numba
+import numpy as np
+
+from ndt_cli.core.geometry import VOXEL_OFFSET as _OFFSET
+from ndt_cli.core.geometry import voxel_keys
+from ndt_cli.ndt.slicing import cut_slices
+
+MAX_SLICES = 63  # slice membership is a bit mask in an int64
+
+Grouped = tuple[np.ndarray, np.ndarray, np.ndarray]  # voxel keys, (n,3) sums, counts
+
+
+@numba.njit(cache=True)
+def _bounds(points):  # pragma: no cover - compiled
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for i in range(points.shape[0]):
+        for k in range(3):
+            v = points[i, k]
+            if v < lo[k]:
+                lo[k] = v
+            if v > hi[k]:
+                hi[k] = v
+    return lo, hi
+
+
+def bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-axis minimum and maximum of (N,3) points."""
+    return _bounds(np.ascontiguousarray(points, dtype=np.float64))
+
+
+@numba.njit(cache=True)
+def _slice_pass(
+    points, reduction, level, heights, half, voxel, mask, xy, keys, sums, counts
+):  # pragma: no cover - compiled
+    m = -1
+    last = np.int64(-1)
+    inside = True
+    for i in range(points.shape[0]):
+        x = points[i, 0] - reduction[0]
+        y = points[i, 1] - reduction[1]
+        z = points[i, 2] - reduction[2]
+        lz = level[2, 0] * x + level[2, 1] * y + level[2, 2] * z
+        bits = np.int64(0)
+        for k in range(heights.shape[0]):
+            if abs(lz - heights[k]) <= half:
+                bits |= np.int64(1) << k
+        mask[i] = bits
+        if bits != 0:
+            xy[i, 0] = level[0, 0] * x + level[0, 1] * y + level[0, 2] * z
+            xy[i, 1] = level[1, 0] * x + level[1, 1] * y + level[1, 2] * z
+        if voxel > 0.0:
+            ix = np.int64(np.floor(x / voxel)) + _OFFSET
+            iy = np.int64(np.floor(y / voxel)) + _OFFSET
+            iz = np.int64(np.floor(z / voxel)) + _OFFSET
+            if min(ix, iy, iz) < 0 or max(ix, iy, iz) >= 2 * _OFFSET:
+                inside = False
+            key = (ix << 42) | (iy << 21) | iz
+            if key != last:  # consecutive points of a scan line often share a voxel: one row
+                m += 1
+                keys[m] = key
+                sums[m, 0] = 0.0
+                sums[m, 1] = 0.0
+                sums[m, 2] = 0.0
+                counts[m] = 0.0
+                last = key
+            sums[m, 0] += x
+            sums[m, 1] += y
+            sums[m, 2] += z
+            counts[m] += 1.0
+    return m + 1, inside
+
+
+def slice_pass(
+    points: np.ndarray,
+    reduction: np.ndarray,
+    level: np.ndarray,
+    heights: Sequence[float],
+    thickness: float,
+    voxel: float,
+) -> tuple[list[np.ndarray], Grouped | None]:
+    """Cut the slices of one chunk and group its points by ICP voxel, in one pass.
+
+    Returns the (n_k,2) slice points in the reduced, levelled frame ``L (p - reduction)`` (as
+    :func:`~ndt_cli.ndt.slicing.cut_slices` at ground 0), and, when ``voxel`` > 0, the points
+    ``p - reduction`` (unlevelled) grouped by ``voxel`` cube: keys, coordinate sums and counts,
+    one row per run of consecutive points in the same cube (merge with
+    :meth:`~ndt_cli.core.geometry.VoxelThinner.add_grouped`).
+    """
+    if len(heights) > MAX_SLICES:
+        raise ValueError(f"at most {MAX_SLICES} slices")
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    n = len(pts)
+    mask = np.empty(n, np.int64)
+    xy = np.empty((n, 2))
+    m_max = n if voxel > 0 else 0
+    keys, sums, counts = np.empty(m_max, np.int64), np.empty((m_max, 3)), np.empty(m_max)
+    m, inside = _slice_pass(
+        pts,
+        np.asarray(reduction, np.float64),
+        np.ascontiguousarray(level, np.float64),
+        np.asarray(heights, np.float64),
+        0.5 * thickness,
+        float(voxel),
+        mask,
+        xy,
+        keys,
+        sums,
+        counts,
+    )
+    if not inside:
+        raise ValueError("points too far from the origin for voxel thinning")
+    hit = np.flatnonzero(mask)  # the few points in any slice, then per slice
+    sub_mask, sub_xy = mask[hit], xy[hit]
+    slices = [np.ascontiguousarray(sub_xy[(sub_mask >> k) & 1 == 1]) for k in range(len(heights))]
+    grouped = (keys[:m], sums[:m], counts[:m]) if voxel > 0 else None
+    return slices, grouped
+
+
+def slice_pass_numpy(
+    points: np.ndarray,
+    reduction: np.ndarray,
+    level: np.ndarray,
+    heights: Sequence[float],
+    thickness: float,
+    voxel: float,
+) -> tuple[list[np.ndarray], Grouped | None]:
+    """Plain-numpy twin of :func:`slice_pass` (one row per point in the grouping)."""
+    rel = points - reduction
+    slices = cut_slices(rel @ np.asarray(level).T, 0.0, heights, thickness)
+    if voxel <= 0:
+        return slices, None
+    return slices, (voxel_keys(rel, voxel), rel, np.ones(len(rel)))
+
+
+def bounds_numpy(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Plain-numpy twin of :func:`bounds`."""
+    return points.min(axis=0), points.max(axis=0)

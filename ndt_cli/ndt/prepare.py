@@ -1,0 +1,297 @@
+"""From a point cloud to what the registration needs: reduction point, levelling, slices.
+
+A scan's reduced frame is its own frame shifted by the reduction point ``r``: the centre of its
+bounding box in x, y (rounded to whole metres) and its ground level in z. All float maths happens
+there, so georeferenced coordinates (e.g. 5e6 m UTM northings) lose no precision, and slice
+heights are simply z values. Levelling turns the reduced frame so that the ground is horizontal.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ndt_cli.config.schema import Config, GroundConfig, InputConfig, SlicesConfig, axes_matrix
+from ndt_cli.core.geometry import VoxelThinner, dominant_up
+from ndt_cli.core.transforms import (
+    levelling_rotation,
+    rotation4,
+    rotation_angle_deg,
+    translation,
+)
+from ndt_cli.errors import InputError
+from ndt_cli.ndt.backend import NUMBA, Kernels
+from ndt_cli.ndt.slicing import GROUND_SAMPLE, estimate_ground, fit_ground_plane
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class PreparedScan:
+    """A scan cut into slices. ``slices[k]`` is (n_k, 2) float64, metres, reduced frame."""
+
+    path: Path | None
+    reduction: np.ndarray  # (3,) float64: a point of the ground plane below the bounding-box centre
+    ground_z: float  # ground level, scan frame (= reduction[2])
+    slices: tuple[np.ndarray, ...]
+    n_points: int
+    level: np.ndarray = field(default_factory=lambda: np.eye(3))  # scan axes -> levelled axes
+    points3d: np.ndarray | None = None  # thinned 3D points minus the reduction (for ICP), m
+
+    def to_local(self) -> np.ndarray:
+        """4x4 from the scan frame to the reduced, levelled frame: q = L (p - reduction)."""
+        return rotation4(self.level) @ translation(-self.reduction)
+
+    def from_local(self) -> np.ndarray:
+        """4x4 from the reduced, levelled frame back to the scan frame."""
+        return translation(self.reduction) @ rotation4(self.level.T)
+
+    @property
+    def tilt_deg(self) -> float:
+        """Angle (degrees) between the scan's z axis and the ground normal."""
+        return rotation_angle_deg(self.level)
+
+    @property
+    def label(self) -> str:
+        return str(self.path) if self.path is not None else "<array>"
+
+    def centroid(self) -> np.ndarray:
+        """Median (x, y) of all slice points, reduced frame: a robust centre of the scene."""
+        xy = np.concatenate(self.slices)
+        return np.median(xy, axis=0) if len(xy) else np.zeros(2)
+
+    def preview(self, max_points: int = 4000) -> np.ndarray:
+        """Thinned slice points as (x, y, z) in the scan's own frame (metres), for top views."""
+        xy = np.concatenate(self.slices)
+        step = max(1, len(xy) // max_points)
+        xyz = np.column_stack([xy[::step], np.zeros(len(xy[::step]))])
+        T = self.from_local()
+        return xyz @ T[:3, :3].T + T[:3, 3]
+
+
+def _in_frame(points: np.ndarray, inp: InputConfig) -> np.ndarray:
+    """``input.axes``, ``input.scale`` and the range limits applied to (N,3) file points."""
+    if inp.axes.replace(" ", "") != "x,y,z" or inp.scale != 1.0:
+        points = points @ (inp.scale * axes_matrix(inp.axes)).T
+    if inp.max_range is not None or inp.min_range > 0:
+        r2 = np.einsum("ij,ij->i", points, points)
+        keep = r2 >= inp.min_range**2
+        if inp.max_range is not None:
+            keep &= r2 <= inp.max_range**2
+        points = points[keep]
+    return np.ascontiguousarray(points)
+
+
+def _no_points_in_range(inp: InputConfig, path: Path | None) -> InputError:
+    return InputError(
+        f"no point between input.min_range and input.max_range "
+        f"({inp.min_range} to {inp.max_range} m from the scanner)",
+        path,
+    )
+
+
+def to_scanner_frame(points: np.ndarray, inp: InputConfig, path: Path | None = None) -> np.ndarray:
+    """Apply ``input.axes``, ``input.scale`` and the range limits to (N,3) file points."""
+    out = _in_frame(points, inp)
+    if len(out) == 0:
+        raise _no_points_in_range(inp, path)
+    return out
+
+
+def usable_array(scan: object) -> np.ndarray:
+    """The finite, non-(0,0,0) rows of an (N,3) array the user passed (see ``io.as_points``)."""
+    from ndt_cli.io import as_points, unusable
+
+    pts = as_points(scan)
+    nonfinite, zero = unusable(pts)
+    drop = nonfinite | zero
+    if drop.all():
+        raise InputError("the array holds no usable points")
+    if drop.any():
+        log.info("dropped %d non-finite or (0,0,0) points", int(drop.sum()))
+        pts = pts[~drop]
+    return pts
+
+
+def load_points(
+    scan: str | Path | np.ndarray, inp: InputConfig | None = None
+) -> tuple[np.ndarray, Path | None]:
+    """(N,3) float64 points of a file path or an array in the scanner frame (metres, z up; see
+    :class:`~ndt_cli.config.InputConfig`). Non-finite and (0,0,0) points are dropped."""
+    inp = inp or InputConfig()
+    if isinstance(scan, str | Path):
+        from ndt_cli import io
+
+        cloud = io.read(scan)
+        return to_scanner_frame(cloud.points, inp, cloud.path), cloud.path
+    return to_scanner_frame(usable_array(scan), inp), None
+
+
+@dataclass(frozen=True)
+class ScanChunks:
+    """A scan as a re-iterable sequence of (m,3) float64 chunks in the scanner frame.
+
+    Files with more than ``input.chunk_points`` points (LAS/LAZ) are streamed and read twice, so
+    memory grows with the chunk and the points kept, not with the file; smaller files and arrays
+    are one chunk held in memory.
+    """
+
+    chunks: Callable[[], Iterable[np.ndarray]]
+    n_points: int  # points announced (the file's count before dropping unusable ones)
+    path: Path | None
+
+    @classmethod
+    def of(cls, scan: str | Path | np.ndarray, inp: InputConfig) -> ScanChunks:
+        if not isinstance(scan, str | Path):
+            pts = to_scanner_frame(usable_array(scan), inp)
+            return cls(lambda: (pts,), len(pts), None)
+        from ndt_cli import io
+
+        path = Path(scan)
+        n = io.count(path)
+        if n is not None and n > inp.chunk_points:
+            return cls(
+                lambda: (_in_frame(c, inp) for c in io.read_chunks(path, inp.chunk_points)),
+                n,
+                path,
+            )
+        pts, _ = load_points(path, inp)
+        return cls(lambda: (pts,), len(pts), path)
+
+
+@dataclass(frozen=True)
+class _FirstPass:
+    lo: np.ndarray  # bounding box, scanner frame, m
+    hi: np.ndarray
+    sample: np.ndarray  # regular-stride sample of at most GROUND_SAMPLE points
+    n_points: int
+
+
+def _first_pass(scan: ScanChunks, inp: InputConfig, kernels: Kernels) -> _FirstPass:
+    """Bounding box, a regular-stride sample for the ground and the levelling, and the count."""
+    stride = scan.n_points // GROUND_SAMPLE + 1
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    parts, seen = [], 0
+    for c in scan.chunks():
+        if len(c) == 0:
+            continue
+        c_lo, c_hi = kernels.bounds(c)
+        lo, hi = np.minimum(lo, c_lo), np.maximum(hi, c_hi)
+        parts.append(c[(-seen) % stride :: stride])
+        seen += len(c)
+    if seen == 0:
+        raise _no_points_in_range(inp, scan.path)
+    return _FirstPass(lo, hi, np.concatenate(parts), seen)
+
+
+def reduction_and_level(
+    lo: np.ndarray, hi: np.ndarray, sample: np.ndarray, ground: GroundConfig
+) -> tuple[np.ndarray, np.ndarray]:
+    """Reduction point (scanner frame, m) and levelling rotation of a scan from its bounding
+    box and a sample of its points: coarse levelling from the dominant up direction (tilts of
+    many degrees), then the ground level and the plane of the ground itself."""
+    centre = np.array([*np.round(0.5 * (lo[:2] + hi[:2])), np.round(lo[2])])
+    if ground.z is not None:
+        return np.array([centre[0], centre[1], float(ground.z)]), np.eye(3)
+    rel = sample - centre
+    level = np.eye(3)
+    if ground.level:
+        u = dominant_up(rel)
+        level = levelling_rotation(-u[0] / u[2], -u[1] / u[2])
+        rel = rel @ level.T
+    offset = np.array([0.0, 0.0, estimate_ground(rel[:, 2], ground.bin_size)])
+    fine = np.eye(3)
+    if ground.level:
+        a, b, c = fit_ground_plane(rel - offset)
+        offset[2] += c  # the reduction point lies on the ground plane
+        fine = levelling_rotation(a, b)
+    return centre + level.T @ offset, fine @ level
+
+
+def _second_pass(
+    scan: ScanChunks,
+    reduction: np.ndarray,
+    level: np.ndarray,
+    slices: SlicesConfig,
+    icp_voxel: float,
+    kernels: Kernels,
+) -> tuple[list[np.ndarray], np.ndarray | None]:
+    """The slices (reduced, levelled frame) and, when ``icp_voxel`` > 0, the points thinned to
+    one per ``icp_voxel`` cube (reduced frame, not levelled)."""
+    parts: list[list[np.ndarray]] = [[] for _ in slices.heights]
+    thinner = VoxelThinner(icp_voxel) if icp_voxel > 0 else None
+    for c in scan.chunks():
+        try:
+            cut, grouped = kernels.slice_pass(
+                c, reduction, level, slices.heights, slices.thickness, icp_voxel
+            )
+        except ValueError as exc:
+            raise InputError(f"{exc} (scan spans more than 100 km?)", scan.path) from None
+        for k, part in enumerate(cut):
+            parts[k].append(part)
+        if thinner is not None and grouped is not None:
+            thinner.add_grouped(*grouped)
+    cut_slices = [np.concatenate(p) if len(p) != 1 else p[0] for p in parts]
+    return cut_slices, None if thinner is None else thinner.result()
+
+
+def prepare_chunks(
+    scan: ScanChunks,
+    *,
+    ground: GroundConfig,
+    slices: SlicesConfig,
+    icp_voxel: float = 0.0,
+    min_points: int = 3,
+    kernels: Kernels = NUMBA,
+    inp: InputConfig | None = None,
+) -> PreparedScan:
+    """Find the reduction point and ground level of a scan and cut its slices.
+
+    Two passes over the chunks: the first takes the bounding box and a regular sample for the
+    ground and the levelling; the second cuts the slices and thins the points for ICP
+    (``icp_voxel`` m, 0: no ICP points). Fewer than ``min_points`` slice points is an error.
+    """
+    first = _first_pass(scan, inp or InputConfig(), kernels)
+    reduction, level = reduction_and_level(first.lo, first.hi, first.sample, ground)
+    cut, thin = _second_pass(scan, reduction, level, slices, icp_voxel, kernels)
+    if sum(len(s) for s in cut) < min_points:
+        raise InputError(
+            f"no points in any slice at heights {list(slices.heights)} m above the ground "
+            f"(ground found at z = {reduction[2]:.2f}); check slices.heights or set ground.z",
+            scan.path,
+        )
+    return PreparedScan(
+        scan.path, reduction, float(reduction[2]), tuple(cut), first.n_points, level, thin
+    )
+
+
+def prepare(points: np.ndarray, cfg: Config, path: Path | None = None) -> PreparedScan:
+    """:func:`prepare_chunks` of a scan held in memory, with the settings of ``cfg``."""
+    return load_and_prepare_chunks(ScanChunks(lambda: (points,), len(points), path), cfg)
+
+
+def load_and_prepare_chunks(
+    scan: ScanChunks, cfg: Config, kernels: Kernels = NUMBA
+) -> PreparedScan:
+    """:func:`prepare_chunks` with the ground, slices, ICP thinning and grid settings of ``cfg``."""
+    icp_voxel = cfg.refine.voxel if cfg.refine.method == "icp" else 0.0
+    return prepare_chunks(
+        scan,
+        ground=cfg.ground,
+        slices=cfg.slices,
+        icp_voxel=icp_voxel,
+        min_points=cfg.grid.min_points,
+        kernels=kernels,
+        inp=cfg.input,
+    )
+
+
+def load_and_prepare(
+    scan: str | Path | np.ndarray, cfg: Config, kernels: Kernels = NUMBA
+) -> PreparedScan:
+    """Read a scan (streamed when large, see :class:`ScanChunks`) and prepare it."""
+    return load_and_prepare_chunks(ScanChunks.of(scan, cfg.input), cfg, kernels)

@@ -1,0 +1,179 @@
+"""Multi-slice 2D NDT registration of two scans (Ripperda & Brenner 2005), in named stages.
+
+1. **Start search** (no initial guess, :mod:`ndt_cli.ndt.search`): many starts at the coarsest
+   cell size, the best distinct solutions kept as candidates. With a guess, the guess is the
+   only candidate and every cell size is a refinement level.
+2. **Coarse to fine** (:mod:`ndt_cli.ndt.coarse_to_fine`): every candidate refined through the
+   finer cell sizes, with restarts from +-1/2 and +-1 cell offsets at each level.
+3. **Winner by evidence**: fit-weighted scores over the three finest levels; the second
+   distinct candidate's share is the ambiguity.
+4. **Quality metrics** of the winner at the finest cell (:mod:`ndt_cli.ndt.quality`).
+5. **Refinement**: robust point-to-plane ICP in full 6-DOF (:mod:`ndt_cli.ndt.refine`).
+6. **Status** from the gate's thresholds and the degeneracy of both Hessians.
+
+Every stage receives its own config section. The compiled kernels are injectable
+(:mod:`ndt_cli.ndt.backend`): ``kernels=NUMPY`` runs the whole method on the numpy twins.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from ndt_cli.config.schema import Config
+from ndt_cli.core.transforms import pose2d_matrix, yaw_of
+from ndt_cli.ndt.backend import NUMBA, Kernels
+from ndt_cli.ndt.coarse_to_fine import Ranked, coarse_to_fine, rank
+from ndt_cli.ndt.levels import SourceSampler, TargetMaps
+from ndt_cli.ndt.prepare import PreparedScan, load_and_prepare
+from ndt_cli.ndt.quality import Fit, Verdict, judge, measure_fit
+from ndt_cli.ndt.refine import Refinement, refine_pose
+from ndt_cli.ndt.result import LevelStats, RegistrationResult
+from ndt_cli.ndt.search import start_search
+
+
+def _starts(
+    target: PreparedScan,
+    source: PreparedScan,
+    maps: TargetMaps,
+    sampler: SourceSampler,
+    cfg: Config,
+    init: np.ndarray | None,
+    kernels: Kernels,
+) -> tuple[np.ndarray, list[LevelStats], tuple[float, ...]]:
+    """Candidate poses (reduced frames), the search's level record and the refinement schedule."""
+    cells = cfg.grid.cell_sizes
+    if init is not None:
+        T_local = target.to_local() @ np.asarray(init, float) @ source.from_local()
+        return np.array([[T_local[0, 3], T_local[1, 3], yaw_of(T_local)]]), [], cells
+    found = start_search(
+        target, source, maps, sampler, cells[0], cfg.search, cfg.optimizer, kernels
+    )
+    return found.candidates, [found.level], cells[1:] if len(cells) > 1 else cells
+
+
+def _refine(
+    target: PreparedScan, source: PreparedScan, T: np.ndarray, ok: bool, cfg: Config
+) -> Refinement:
+    """ICP from the NDT result ``T`` when it is asked for and NDT found a converged overlap
+    (``ok``)."""
+    if cfg.refine.method != "icp" or not ok:
+        return Refinement(T)
+    return refine_pose(
+        target.points3d,
+        source.points3d,
+        target.reduction,
+        source.reduction,
+        T,
+        cfg.refine,
+        cfg.quality.overlap_distance,
+    )
+
+
+@dataclass(frozen=True)
+class _Stages:
+    """What the stages found, as the result needs it."""
+
+    levels: tuple[LevelStats, ...]
+    converged: bool
+    ranked: Ranked
+    fit: Fit
+    refinement: Refinement
+    verdict: Verdict
+    points_per_slice: tuple[int, ...]
+
+
+def register_prepared(
+    target: PreparedScan,
+    source: PreparedScan,
+    cfg: Config,
+    init: np.ndarray | None = None,
+    kernels: Kernels = NUMBA,
+) -> RegistrationResult:
+    """Register prepared scans; ``init`` is an optional 4x4 guess of T_target_source."""
+    t_start = time.perf_counter()
+    maps = TargetMaps(target.slices, cfg.grid)
+    sampler = SourceSampler(source.slices, cfg.source)
+    candidates, levels, schedule = _starts(target, source, maps, sampler, cfg, init, kernels)
+    refined = coarse_to_fine(
+        candidates, schedule, maps, sampler, cfg.optimizer, cfg.search.refine_offsets, kernels
+    )
+    ranked = rank(refined, schedule[-1])
+    fit = measure_fit(maps(schedule[-1]), sampler.fine, ranked.poses[0], ranked.ambiguity, kernels)
+    T = target.from_local() @ pose2d_matrix(*ranked.poses[0]) @ source.to_local()
+    t_ndt = time.perf_counter() - t_start
+    refinement = _refine(target, source, T, fit.score > 0.0 and refined.converged, cfg)
+    verdict = judge(fit, refined.converged, refinement, target.level, cfg.quality)
+    per_slice = tuple(int(n) for n in sampler.fine.per_slice(len(source.slices)))
+    stages = _Stages(
+        (*levels, *refined.levels), refined.converged, ranked, fit, refinement, verdict, per_slice
+    )
+    timings = {
+        "grid_s": maps.build_s,
+        "ndt_s": t_ndt - maps.build_s,
+        "refine_s": time.perf_counter() - t_start - t_ndt,
+    }
+    return _result(target, source, stages, time.perf_counter() - t_start, timings)
+
+
+def _result(
+    target: PreparedScan,
+    source: PreparedScan,
+    s: _Stages,
+    runtime_s: float,
+    timings: dict[str, float],
+) -> RegistrationResult:
+    icp = s.refinement.icp
+    return RegistrationResult(
+        T_target_source=s.refinement.T,
+        status=s.verdict.status,
+        converged=s.converged,
+        score=s.fit.score,
+        score_per_point=s.fit.per_point,
+        overlap=s.fit.overlap,
+        points_per_slice=s.points_per_slice,
+        levels=s.levels,
+        candidates=s.ranked.records(),
+        hessian=s.fit.hessian,
+        ground_z_target=target.ground_z,
+        ground_z_source=source.ground_z,
+        runtime_s=runtime_s,
+        target=target.label,
+        source=source.label,
+        warnings=s.verdict.warnings,
+        icp_rms=float("nan") if icp is None else icp.rms,
+        icp_inliers=0 if icp is None else icp.inliers,
+        icp_hessian=None if icp is None else icp.hessian,
+        overlap_3d=float("nan") if icp is None else icp.overlap,
+        weak_direction=s.verdict.weak_direction,
+        timings=timings,
+    )
+
+
+def register(
+    target: str | Path | np.ndarray,
+    source: str | Path | np.ndarray,
+    config: Config | str | Path | None = None,
+    init: np.ndarray | None = None,
+    kernels: Kernels = NUMBA,
+) -> RegistrationResult:
+    """Register SOURCE onto TARGET; the result's ``T_target_source`` maps source to target.
+
+    ``target``/``source`` are point files (PLY, LAS/LAZ, E57, PCD, xyz/txt/csv) or (N,3) arrays
+    in metres; ``config`` a :class:`~ndt_cli.config.Config`, a YAML path or ``None`` for the
+    defaults; ``init`` an optional 4x4 guess of ``T_target_source`` (no guess: a start search is
+    run); ``kernels`` the compiled kernels or their numpy twins (:mod:`ndt_cli.ndt.backend`).
+    """
+    from ndt_cli.config import load
+
+    t0 = time.perf_counter()
+    cfg = config if isinstance(config, Config) else load(config)
+    tgt = load_and_prepare(target, cfg, kernels)
+    src = load_and_prepare(source, cfg, kernels)
+    t_read = time.perf_counter() - t0
+    result = register_prepared(tgt, src, cfg, init, kernels)
+    timings = {"read_prepare_s": t_read, **result.timings}
+    return replace(result, runtime_s=time.perf_counter() - t0, timings=timings)

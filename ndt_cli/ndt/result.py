@@ -1,0 +1,215 @@
+"""Result objects of a registration (frozen; arrays are float64, metres and degrees)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from enum import StrEnum
+from typing import Any
+
+import numpy as np
+
+from ndt_cli.core.transforms import yaw_of
+
+
+class Status(StrEnum):
+    """Outcome of one registration; the value is what CSV and JSON files hold.
+
+    ``ok``; ``degenerate`` (converged, but a translation direction is weakly constrained, as
+    along a straight corridor); ``suspect`` (converged, but below a quality threshold);
+    ``not_converged``; ``no_overlap`` (score zero); ``failed`` (a link of a chain that could not
+    be registered at all, e.g. an unreadable scan).
+    """
+
+    OK = "ok"
+    DEGENERATE = "degenerate"
+    SUSPECT = "suspect"
+    NOT_CONVERGED = "not_converged"
+    NO_OVERLAP = "no_overlap"
+    FAILED = "failed"
+
+
+@dataclass(frozen=True)
+class LevelStats:
+    """One cell size of the coarse-to-fine schedule, for the winning start."""
+
+    cell_size: float  # m
+    starts: int  # poses optimised in parallel at this level
+    iterations: int  # iterations of the winning start
+    score: float  # final NDT score (sum over slices and points)
+    score_per_point: float
+    converged: bool  # stopped because the score stopped improving
+    time_s: float
+
+    def describe(self) -> str:
+        """One line for logs: cell size, iterations, score and time."""
+        return (
+            f"{self.cell_size:g} m: {self.iterations} it, score {self.score:.0f}, "
+            f"{self.time_s:.2f} s"
+        )
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A distinct solution of the start search, refined to the finest cell size."""
+
+    tx: float  # m, reduced frames
+    ty: float
+    yaw_deg: float
+    score: float  # at the finest cell size
+    evidence: float  # fit-weighted score summed over the finest levels (the winner's is highest)
+
+
+def describe_direction(v: np.ndarray | None) -> str:
+    """Text of a weakly constrained translation direction ('' when there is none)."""
+    if v is None:
+        return ""
+    return f"translation along ({v[0]:.2f}, {v[1]:.2f}, {v[2]:.2f})"
+
+
+@dataclass(frozen=True)
+class RegistrationResult:
+    """Outcome of registering SOURCE onto TARGET.
+
+    ``T_target_source`` (4x4) maps source points into the target frame: ``p_t = T @ p_source``.
+    ``status`` is a :class:`Status`; ``converged``: the finest level stopped because its score
+    stopped improving. ``weak_direction`` is the unit translation direction (levelled target
+    frame) that a degenerate result cannot determine, None when every direction is constrained.
+    ``hessian`` is the 3x3 Hessian of f = -score in (tx [m], ty [m], yaw [rad]) at the solution;
+    ``icp_hessian`` the 6x6 normal matrix of ICP (rotation vector [rad], translation [m]; target
+    frame), None without ICP. ``overlap_3d``: share of the moving scan's thinned points with a
+    target point within ``quality.overlap_distance`` after ICP (NaN without ICP).
+    """
+
+    T_target_source: np.ndarray
+    status: Status
+    converged: bool
+    score: float
+    score_per_point: float
+    overlap: float  # share of source slice points inside a target cell at the finest level
+    points_per_slice: tuple[int, ...]
+    levels: tuple[LevelStats, ...]
+    candidates: tuple[Candidate, ...]
+    hessian: np.ndarray
+    ground_z_target: float  # m, target frame
+    ground_z_source: float  # m, source frame
+    runtime_s: float
+    target: str | None = None
+    source: str | None = None
+    warnings: tuple[str, ...] = field(default=())
+    icp_rms: float = float("nan")  # RMS of the inlier point-to-plane distances after ICP, m
+    icp_inliers: int = 0
+    icp_hessian: np.ndarray | None = None
+    overlap_3d: float = float("nan")
+    weak_direction: np.ndarray | None = None
+    timings: dict[str, float] = field(default_factory=dict)  # s: grid_s, ndt_s, refine_s
+
+    def __repr__(self) -> str:
+        rot = f"yaw {self.yaw_deg:.4f} deg"
+        tx, ty, tz = self.translation
+        return (
+            f"RegistrationResult({self.status.value}, t = ({tx:.4f}, {ty:.4f}, {tz:.4f}) m, "
+            f"{rot}, score/point {self.score_per_point:.3f}, overlap {self.overlap:.2f}, "
+            f"ambiguity {self.ambiguity:.2f}, {self.runtime_s:.2f} s)"
+        )
+
+    @property
+    def ok(self) -> bool:
+        return self.status is Status.OK
+
+    @property
+    def degenerate(self) -> str:
+        """Text of :attr:`weak_direction` ('' when there is none)."""
+        return describe_direction(self.weak_direction)
+
+    @property
+    def iterations(self) -> int:
+        return sum(level.iterations for level in self.levels)
+
+    @property
+    def translation(self) -> np.ndarray:
+        return self.T_target_source[:3, 3].copy()
+
+    @property
+    def yaw_deg(self) -> float:
+        return float(np.degrees(yaw_of(self.T_target_source)))
+
+    @property
+    def hessian_eigenvalues(self) -> np.ndarray:
+        """Eigenvalues (ascending) of the NDT Hessian :attr:`hessian`."""
+        return np.linalg.eigvalsh(self.hessian)
+
+    @property
+    def icp_hessian_eigenvalues(self) -> np.ndarray:
+        """Eigenvalues (ascending) of :attr:`icp_hessian`; empty without ICP."""
+        return np.zeros(0) if self.icp_hessian is None else np.linalg.eigvalsh(self.icp_hessian)
+
+    @property
+    def ambiguity(self) -> float:
+        """Evidence of the second-best distinct candidate over the best (0: unique, 1: a tie)."""
+        if len(self.candidates) < 2 or self.candidates[0].evidence <= 0:
+            return 0.0
+        return float(self.candidates[1].evidence / self.candidates[0].evidence)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict: every field, plus values derived from them for readers of the file."""
+        tx, ty, tz = self.translation
+        return {
+            "target": self.target,
+            "source": self.source,
+            "status": self.status.value,
+            "converged": self.converged,
+            "T_target_source": self.T_target_source.tolist(),
+            "tx": tx,
+            "ty": ty,
+            "tz": tz,
+            "yaw_deg": self.yaw_deg,
+            "score": self.score,
+            "score_per_point": self.score_per_point,
+            "overlap": self.overlap,
+            "ambiguity": self.ambiguity,
+            "points_per_slice": list(self.points_per_slice),
+            "iterations": self.iterations,
+            "levels": [vars(level) for level in self.levels],
+            "candidates": [vars(c) for c in self.candidates],
+            "hessian": self.hessian.tolist(),
+            "ground_z_target": self.ground_z_target,
+            "ground_z_source": self.ground_z_source,
+            "runtime_s": self.runtime_s,
+            "warnings": list(self.warnings),
+            "icp_rms": self.icp_rms,
+            "icp_inliers": self.icp_inliers,
+            "overlap_3d": self.overlap_3d,
+            "degenerate": self.degenerate,
+            "hessian_eigenvalues": self.hessian_eigenvalues.tolist(),
+            "icp_hessian": _list(self.icp_hessian),
+            "icp_hessian_eigenvalues": self.icp_hessian_eigenvalues.tolist(),
+            "timings": dict(self.timings),
+            "weak_direction": _list(self.weak_direction),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> RegistrationResult:
+        """The result that :meth:`to_dict` described (derived values are ignored)."""
+        names = {f.name for f in fields(cls)}
+        kw = {k: v for k, v in d.items() if k in names}
+        kw.update(
+            T_target_source=np.array(d["T_target_source"], dtype=float),
+            status=Status(d["status"]),
+            points_per_slice=tuple(d["points_per_slice"]),
+            levels=tuple(LevelStats(**lv) for lv in d["levels"]),
+            candidates=tuple(Candidate(**c) for c in d["candidates"]),
+            hessian=np.array(d["hessian"], dtype=float),
+            warnings=tuple(d["warnings"]),
+            icp_hessian=_array(d.get("icp_hessian")),
+            weak_direction=_array(d.get("weak_direction")),
+            timings=dict(d.get("timings", {})),
+        )
+        return cls(**kw)
+
+
+def _list(a: np.ndarray | None) -> list | None:
+    return None if a is None else np.asarray(a).tolist()
+
+
+def _array(v: list | None) -> np.ndarray | None:
+    return None if v is None else np.array(v, dtype=float)

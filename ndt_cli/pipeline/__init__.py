@@ -1,0 +1,1 @@
+"""Many scans: their order and names, link records, executors (local, Dask), the chain driver."""

@@ -1,0 +1,90 @@
+"""Run chain tasks on a Dask cluster (optional extra ``[dask]``: ``dask[distributed]``).
+
+Workers read the scans themselves from their paths, so every worker must reach the files under
+the same paths (shared storage: NFS, SMB, a cluster file system). Tasks return only transforms
+and metrics. A worker lost mid-task is replaced and its task rerun by Dask (up to
+``allowed-failures`` times); a task that fails because of its data returns a failed link and is
+not retried.
+"""
+
+from __future__ import annotations
+
+import logging
+import uuid
+from collections.abc import Hashable, Iterator
+from typing import Any
+
+from ndt_cli.errors import ConfigError
+from ndt_cli.pipeline.workers import Task, set_threads
+
+log = logging.getLogger(__name__)
+
+
+def _in_worker(threads: int, task: Task) -> Any:
+    """Run a chain task inside a Dask worker with a bounded number of Numba threads."""
+    set_threads(threads)
+    return task()
+
+
+class DaskPool:
+    """The :class:`~ndt_cli.pipeline.executors.Executor` interface on a Dask cluster.
+
+    ``scheduler``: address of a running scheduler (``tcp://host:8786``); None starts a
+    LocalCluster of ``jobs`` worker processes on this machine and prints its dashboard address.
+    """
+
+    ships_data = False  # tasks read their scans from paths; nothing large goes over the wire
+
+    def __init__(self, scheduler: str | None, jobs: int, threads: int, retries: int = 2) -> None:
+        try:
+            from dask.distributed import Client, LocalCluster
+        except ImportError:
+            raise ConfigError(
+                "--executor dask needs dask.distributed: pip install 'ndt-cli[dask]'"
+            ) from None
+        self.threads = threads
+        self.retries = retries
+        self._cluster = None
+        try:
+            if scheduler is None:
+                self._cluster = LocalCluster(
+                    n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=":0"
+                )
+                self.client = Client(self._cluster)
+                log.warning("Dask dashboard: %s", self.client.dashboard_link)
+            else:
+                self.client = Client(scheduler, timeout="30s")
+        except (OSError, TimeoutError) as exc:
+            raise ConfigError(f"cannot reach the Dask scheduler {scheduler}: {exc}") from None
+
+    def run(self, tasks: dict[Hashable, Task]) -> Iterator[tuple[Hashable, Any]]:
+        """Yield (key, result) as tasks finish; a task that raised yields its one-line reason."""
+        from dask.distributed import as_completed
+
+        run_id = uuid.uuid4().hex[:8]
+        futures = {
+            self.client.submit(
+                _in_worker,
+                self.threads,
+                task,
+                key=f"ndt-{run_id}-{key}",
+                pure=False,
+                retries=self.retries,
+            ): key
+            for key, task in tasks.items()
+        }
+        for fut in as_completed(futures):
+            key = futures[fut]
+            try:
+                yield key, fut.result()
+            except Exception as exc:  # KilledWorker, or a bug in the task
+                yield key, f"worker error: {' '.join(str(exc).split())[:200]}"
+
+    def terminate(self) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self.client.close()
+        if self._cluster is not None:
+            self._cluster.close()
+            self._cluster = None

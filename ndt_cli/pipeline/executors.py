@@ -1,0 +1,45 @@
+"""Where the tasks of a chain run: worker processes on this machine, or a Dask cluster.
+
+An executor runs a dict of tasks (:data:`~ndt_cli.pipeline.workers.Task`) and yields
+``(key, value)`` as they finish; a task that raised or whose worker died yields a one-line reason
+(a ``str``) instead of its value.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable, Iterator
+from enum import StrEnum
+from typing import Any, Protocol
+
+from ndt_cli.pipeline.local_pool import WorkerPool
+from ndt_cli.pipeline.workers import Task, default_jobs, threads_per_job
+
+
+class ExecutorKind(StrEnum):
+    """``local``: processes on this machine; ``dask``: a Dask cluster."""
+
+    LOCAL = "local"
+    DASK = "dask"
+
+
+class Executor(Protocol):
+    """What the chain driver needs of an executor."""
+
+    ships_data: bool  # True: tasks may take prepared scans; False: tasks read files themselves
+
+    def run(self, tasks: dict[Hashable, Task]) -> Iterator[tuple[Hashable, Any]]: ...
+
+    def terminate(self) -> None: ...
+
+    def close(self) -> None: ...
+
+
+def make_executor(kind: ExecutorKind, jobs: int | None, scheduler: str | None = None) -> Executor:
+    """An executor of ``kind``: ``jobs`` local processes, or the Dask cluster at ``scheduler``
+    (None: a LocalCluster of ``jobs`` workers)."""
+    n = default_jobs(jobs)
+    if kind is ExecutorKind.DASK:
+        from ndt_cli.pipeline.dask_executor import DaskPool
+
+        return DaskPool(scheduler, n, threads_per_job(n))
+    return WorkerPool(n, threads_per_job(n))

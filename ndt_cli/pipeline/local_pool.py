@@ -1,0 +1,92 @@
+"""Worker processes on this machine (the local executor of a chain)."""
+
+from __future__ import annotations
+
+import multiprocessing
+import signal
+from collections.abc import Callable, Hashable, Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
+from typing import Any
+
+from ndt_cli.pipeline.workers import Task, set_threads, threads_per_job
+
+
+def _init_worker(threads: int, init: Callable[[], None] | None) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is handled by the parent
+    set_threads(threads)
+    if init is not None:
+        init()
+
+
+class WorkerPool:
+    """Worker processes that survive a worker dying.
+
+    Processes are spawned, not forked: a forked child of a process whose Numba threads already
+    ran can deadlock. When a worker dies (killed, out of memory, a crash in a library), every
+    task in flight fails with BrokenProcessPool; those tasks are then rerun one at a time in a
+    fresh single-worker pool, so only the task that kills its worker fails. ``init`` runs once
+    in every worker process before its first task.
+    """
+
+    ships_data = True
+
+    def __init__(
+        self, jobs: int, threads: int | None = None, init: Callable[[], None] | None = None
+    ) -> None:
+        self.jobs = jobs
+        self.threads = threads if threads is not None else threads_per_job(jobs)
+        self._init = init
+        self._pool: ProcessPoolExecutor | None = None
+
+    def _new(self, workers: int) -> ProcessPoolExecutor:
+        self.close()
+        self._pool = ProcessPoolExecutor(
+            max_workers=workers,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=_init_worker,
+            initargs=(self.threads, self._init),
+        )
+        return self._pool
+
+    def run(self, tasks: dict[Hashable, Task]) -> Iterator[tuple[Hashable, Any]]:
+        """Yield (key, result) as tasks finish; a task that fails yields its one-line reason."""
+        queue = list(tasks)
+        workers = self.jobs
+        while queue:
+            pool = self._pool if self._pool and workers == self.jobs else self._new(workers)
+            broken: list[Hashable] = []
+            yield from _collect({pool.submit(tasks[k]): k for k in queue}, broken)
+            queue = [k for k in queue if k in broken]
+            if queue and workers == 1:  # in isolation the first task in line killed its worker
+                yield queue.pop(0), "the worker process died (killed, out of memory or crashed)"
+            if queue:
+                workers = 1
+                self._new(1)
+
+    def terminate(self) -> None:
+        """Stop the workers now (on Ctrl-C): running tasks are abandoned, nothing is written."""
+        pool = self._pool
+        if pool is None:
+            return
+        for proc in list(getattr(pool, "_processes", {}).values()):
+            proc.terminate()
+        pool.shutdown(wait=False, cancel_futures=True)
+        self._pool = None
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+
+
+def _collect(futures: dict, broken: list[Hashable]) -> Iterator[tuple[Hashable, Any]]:
+    """Results of finished futures; keys of those whose worker died go to ``broken``."""
+    for fut in as_completed(futures):
+        key = futures[fut]
+        try:
+            yield key, fut.result()
+        except BrokenProcessPool:
+            broken.append(key)
+        except Exception as exc:  # a bug in a task: report it for that task only
+            yield key, f"worker error: {' '.join(str(exc).split())[:200]}"

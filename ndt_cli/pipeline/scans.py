@@ -1,0 +1,80 @@
+"""The scans of a campaign: their order, their identity (file hash) and the names of their files.
+
+Scans are taken in natural order of their file names (``scan_2`` before ``scan_10``; ties broken
+by the folder). A scan is named by its file name in every output, or, where two scans share a
+file name, by as much of its path as tells them apart; the scans of a multi-scan E57 file are
+``FILE.e57#K``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+_HASH_CHUNK = 1 << 20
+
+
+def natural_key(path: str | Path) -> list[Any]:
+    """Sort key: digit runs compare as numbers, so scan_2 comes before scan_10."""
+    return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", str(path))]
+
+
+def natural_sort(paths: Sequence[str | Path]) -> list[Path]:
+    """Paths in natural order of their file names, then folders (see :func:`natural_key`)."""
+    return [
+        Path(p) for p in sorted(paths, key=lambda p: (natural_key(Path(p).name), natural_key(p)))
+    ]
+
+
+def file_hash(path: Path) -> str:
+    """SHA-256 of a scan's file bytes (and its scan number in an E57); 'missing' if unreadable."""
+    from ndt_cli.io.e57 import split_spec
+
+    file, index = split_spec(path)
+    h = hashlib.sha256(b"" if index is None else f"#{index}".encode())
+    try:
+        with open(file, "rb") as fh:
+            while chunk := fh.read(_HASH_CHUNK):
+                h.update(chunk)
+    except OSError:
+        return "missing"
+    return h.hexdigest()
+
+
+def scan_names(paths: Sequence[Path]) -> list[str]:
+    """One name per scan, unique: the file name, or the shortest tail of the path that no
+    other scan shares (``north/scan_1.laz`` and ``south/scan_1.laz``)."""
+    parts = [Path(p).parts for p in paths]
+    names = [p.name for p in map(Path, paths)]
+    depth = 1
+    while len(set(names)) < len(names):
+        depth += 1
+        clash = {n for n in names if names.count(n) > 1}
+        names = [
+            "/".join(parts[k][-depth:]) if names[k] in clash else names[k]
+            for k in range(len(names))
+        ]
+        if depth > max(len(p) for p in parts):
+            names = [str(p) for p in paths]
+            break
+    return names
+
+
+def file_stem(name: str) -> str:
+    """A scan name as part of a file name: no folders, no extension, ``#`` as ``_``.
+
+    ``scan_00.laz`` -> ``scan_00``; ``campaign.e57#2`` -> ``campaign_2``;
+    ``north/scan_1.laz`` -> ``north_scan_1``.
+    """
+    head, _, index = name.partition("#")
+    stem = head.rsplit(".", 1)[0] if "." in Path(head).name else head
+    stem = stem.replace("/", "_").replace("\\", "_")
+    return f"{stem}_{index}" if index else stem
+
+
+def link_file_name(target: str, source: str) -> str:
+    """File of a link's 4x4 ``T_target_source``: ``T_<target>_<source>.txt``."""
+    return f"T_{file_stem(target)}_{file_stem(source)}.txt"

@@ -1,0 +1,62 @@
+"""The tasks that worker processes run for a chain: prepare a scan, register a link.
+
+Tasks never raise for a problem with the data: a scan that cannot be used becomes the one-line
+reason (a ``str``), a link that cannot be registered a failed :class:`Link`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from ndt_cli.config.schema import Config
+from ndt_cli.errors import NdtError
+from ndt_cli.ndt.prepare import PreparedScan, load_and_prepare
+from ndt_cli.ndt.register import register_prepared
+from ndt_cli.pipeline.links import Link
+
+
+@dataclass(frozen=True)
+class LinkJob:
+    """Which link to register: its index, the target and source scans (indices), its key."""
+
+    index: int
+    target: int
+    source: int
+    key: str
+
+    def failed(self, reason: str) -> Link:
+        return Link(self.index, self.target, self.source, self.key, failure=reason)
+
+
+def prepare_scan(path: Path, cfg: Config) -> PreparedScan | str:
+    """The prepared scan, or the one-line reason why it cannot be used."""
+    try:
+        return load_and_prepare(path, cfg)
+    except NdtError as exc:
+        return str(exc)
+
+
+def scan_problem(path: Path, cfg: Config) -> str | None:
+    """None if the scan can be read and sliced, else the one-line reason (nothing is shipped
+    back: for executors whose tasks read the scans themselves)."""
+    value = prepare_scan(path, cfg)
+    return value if isinstance(value, str) else None
+
+
+def register_link(job: LinkJob, target: PreparedScan, source: PreparedScan, cfg: Config) -> Link:
+    """Register prepared scan ``source`` onto ``target``."""
+    try:
+        result = register_prepared(target, source, cfg)
+    except NdtError as exc:
+        return job.failed(str(exc))
+    return Link(job.index, job.target, job.source, job.key, result)
+
+
+def register_paths(job: LinkJob, target: Path, source: Path, cfg: Config) -> Link:
+    """Read, prepare and register both scans in this process."""
+    scans = [prepare_scan(target, cfg), prepare_scan(source, cfg)]
+    for value in scans:
+        if isinstance(value, str):
+            return job.failed(value)
+    return register_link(job, scans[0], scans[1], cfg)

@@ -1,0 +1,31 @@
+"""What every worker process of a chain shares: the task type and its thread budget.
+
+A task is a picklable callable without arguments (a :func:`functools.partial` of a module-level
+function).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from typing import Any
+
+Task = Callable[[], Any]
+
+
+def threads_per_job(jobs: int) -> int:
+    """Numba threads for each of ``jobs`` parallel workers on this machine's cores."""
+    return max(1, (os.cpu_count() or 1) // max(1, jobs))
+
+
+def default_jobs(jobs: int | None) -> int:
+    """``jobs``, or one per core when not given."""
+    return max(1, jobs or os.cpu_count() or 1)
+
+
+def set_threads(threads: int) -> None:
+    """Bound the Numba threads of this process (BLAS threads would spin against them)."""
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    import numba
+
+    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))

@@ -1,0 +1,1 @@
+"""What a run leaves behind: result files, CSV tables, plots and console summaries."""

@@ -1,0 +1,108 @@
+"""The CSV tables of results: one definition per column, shared by every file that has it.
+
+``report.csv`` (ndt-register) and ``pairs.csv`` (ndt-chain) show the same metrics of a
+registration with the same formatting; an empty cell is a value that does not exist (no ICP,
+a failed link). Lengths are metres, angles degrees.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from ndt_cli.core.transforms import yaw_of
+from ndt_cli.ndt.result import RegistrationResult
+
+
+def num(v: float, digits: int = 6) -> str:
+    """A number with ``digits`` decimals; '' when it is NaN or infinite."""
+    return "" if not np.isfinite(v) else f"{v:.{digits}f}"
+
+
+def _joined(values: Any, fmt: str = "{:.6g}") -> str:
+    return ";".join(fmt.format(v) for v in values)
+
+
+# metric columns of a registration result, in the order the tables show them
+METRICS: dict[str, Callable[[RegistrationResult], str]] = {
+    "tx": lambda r: num(r.translation[0]),
+    "ty": lambda r: num(r.translation[1]),
+    "tz": lambda r: num(r.translation[2]),
+    "yaw_deg": lambda r: num(r.yaw_deg),
+    "score": lambda r: num(r.score, 4),
+    "score_per_point": lambda r: num(r.score_per_point),
+    "overlap": lambda r: num(r.overlap, 4),
+    "ambiguity": lambda r: num(r.ambiguity, 4),
+    "overlap_3d": lambda r: num(r.overlap_3d, 4),
+    "icp_rms": lambda r: num(r.icp_rms, 5),
+    "icp_inliers": lambda r: str(r.icp_inliers),
+    "hessian_eigenvalues": lambda r: _joined(r.hessian_eigenvalues),
+    "icp_hessian_eigenvalues": lambda r: _joined(r.icp_hessian_eigenvalues),
+    "degenerate": lambda r: r.degenerate,
+    "points_per_slice": lambda r: _joined(r.points_per_slice, "{}"),
+    "iterations_per_level": lambda r: _joined((lv.iterations for lv in r.levels), "{}"),
+    "iterations": lambda r: str(r.iterations),
+    "converged": lambda r: str(r.converged).lower(),
+    "status": lambda r: r.status.value,
+    "warnings": lambda r: " | ".join(r.warnings),
+    "runtime_s": lambda r: f"{r.runtime_s:.3f}",
+}
+# what a link without a result (failed) shows in the metric columns
+_FAILED = {"icp_inliers": "0", "iterations": "0", "converged": "false", "runtime_s": "0.000"}
+
+
+def _names(*lines: str) -> tuple[str, ...]:
+    """Column names written as words."""
+    return tuple(word for line in lines for word in line.split())
+
+
+_POSE_AND_FIT = (
+    "tx ty tz yaw_deg score score_per_point overlap ambiguity overlap_3d icp_rms icp_inliers"
+)
+REPORT_COLUMNS = _names(
+    "target source",
+    _POSE_AND_FIT,
+    "hessian_eigenvalues icp_hessian_eigenvalues degenerate points_per_slice",
+    "iterations_per_level converged status warnings runtime_s",
+)
+PAIR_COLUMNS = _names(
+    "link target source", _POSE_AND_FIT, "degenerate iterations converged runtime_s status reason"
+)
+POSE_COLUMNS = _names(
+    "scan file has_pose x y z yaw_deg", *(f"m{r}{c}" for r in range(4) for c in range(4))
+)
+
+
+def metrics(result: RegistrationResult | None, columns: tuple[str, ...]) -> dict[str, str]:
+    """The metric cells of ``columns`` for a result (None: a failed link)."""
+    names = [c for c in columns if c in METRICS]
+    if result is None:
+        return {c: _FAILED.get(c, "") for c in names}
+    return {c: METRICS[c](result) for c in names}
+
+
+def report_row(result: RegistrationResult) -> dict[str, Any]:
+    """The row of ``report.csv`` of a registration."""
+    return {"target": result.target, "source": result.source, **metrics(result, REPORT_COLUMNS)}
+
+
+def pair_row(link: Any, names: tuple[str, ...]) -> dict[str, Any]:
+    """The row of ``pairs.csv`` of a chain's link (``names``: the scans' names)."""
+    row = {"link": link.index, "target": names[link.target], "source": names[link.source]}
+    row.update(metrics(link.result, PAIR_COLUMNS))
+    row.update(status=link.status.value, reason=link.reason)
+    return row
+
+
+def pose_row(k: int, name: str, T: np.ndarray | None) -> dict[str, Any]:
+    """The row of ``poses.csv`` of scan ``k``: its name and T_world_scan (empty without one)."""
+    row: dict[str, Any] = {"scan": k, "file": name, "has_pose": str(T is not None).lower()}
+    M = T if T is not None else np.full((4, 4), np.nan)
+    row.update(x=num(M[0, 3]), y=num(M[1, 3]), z=num(M[2, 3]))
+    row["yaw_deg"] = num(np.degrees(yaw_of(M))) if T is not None else ""
+    row.update(
+        {f"m{r}{c}": ("" if T is None else f"{M[r, c]:.17g}") for r in range(4) for c in range(4)}
+    )
+    return row

@@ -1,0 +1,11 @@
+"""Deterministic terrestrial-laser-scanner simulator of street scenes (tests, samples, benchmarks).
+
+Frames: the **world frame** (right-handed, z up, ground z = 0, the street along x) and each
+**scanner frame**; ``T_world_scan`` maps scanner points into the world. The same seed always
+gives bit-identical output.
+"""
+
+from ndt_cli.sim.scanner import make_sequence, scanner_pose, simulate_scan
+from ndt_cli.sim.scene import Scene, make_street
+
+__all__ = ["Scene", "make_sequence", "make_street", "scanner_pose", "simulate_scan"]
