@@ -60,13 +60,24 @@ def test_errors_success_rates_and_drift(tmp_path):
     assert ev.drift["to"] == "s3.laz" and ev.drift["rotation_error_deg"] == pytest.approx(1.05)
 
 
-def test_cli_writes_eval_files_and_json(tmp_path):
+def _tree(folder):
+    return {p.relative_to(folder): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+def test_cli_writes_eval_files_to_out_and_leaves_the_result_folder_alone(tmp_path):
     poses = [pose2d_matrix(15.0 * k, 0.0, 0.0) for k in range(3)]
     gt = _chain_dir(tmp_path, poses, [(0.0, 0.0), (0.0, 0.03)])
-    res = runner.invoke(eval_app, [str(tmp_path), "--gt", str(gt), "--json"])
+    before = _tree(tmp_path)
+    out = tmp_path.parent / f"{tmp_path.name}_eval"
+    res = runner.invoke(eval_app, [str(tmp_path), "--gt", str(gt), "--json", "--out", str(out)])
     assert res.exit_code == 0, res.output
     data = json.loads(res.stdout)
     assert len(data["links"]) == 2 and data["success"][0]["success_rate"] == 1.0
-    assert (tmp_path / "eval.csv").read_text().startswith("target,source,rotation_error_deg")
+    assert (out / "eval.csv").read_text().startswith("target,source,rotation_error_deg")
+    assert json.loads((out / "eval.json").read_text()) == data
+    assert _tree(tmp_path) == before  # the result folder is only read
+    quiet = runner.invoke(eval_app, [str(tmp_path), "--gt", str(gt), "--quiet"])
+    assert quiet.exit_code == 0 and quiet.stdout == "" and quiet.stderr == ""
+    assert _tree(tmp_path) == before
     bad = runner.invoke(eval_app, [str(tmp_path / "nope"), "--gt", str(gt)])
     assert bad.exit_code == 2 and "nope" in bad.stderr

@@ -8,7 +8,16 @@ from typing import Annotated
 
 import typer
 
-from ndt_cli.cli.common import ConfigOpt, DebugOpt, new_app, setup_logging, user_errors
+from ndt_cli.cli.common import (
+    ConfigOpt,
+    DebugOpt,
+    OneLineCommand,
+    VersionOpt,
+    check_out,
+    new_app,
+    setup_logging,
+    user_errors,
+)
 
 analyze_app = new_app(
     no_args_is_help=True,
@@ -21,35 +30,53 @@ AtOpt = Annotated[
     typer.Option("--at", help="Aligned T_target_source (4x4 text); default: register first."),
 ]
 AnalyzeOut = Annotated[Path, typer.Option("--out", "-o", help="Output folder.")]
+Files = dict[str, str | bytes]
 
 
-def _analysis(target: Path, source: Path, config: Path | None, at: Path | None) -> tuple:
+@analyze_app.callback()
+def _group(version: VersionOpt = None) -> None:
+    """The paper's experiments on your own scans."""
+
+
+def _analysis(target: Path, source: Path, config: str | None, at: Path | None, out: Path) -> tuple:
+    """The config and the prepared, aligned pair, after checking the output folder."""
     from ndt_cli.analysis.experiments import Pair
     from ndt_cli.config import load
     from ndt_cli.io.matrices import read_matrix
     from ndt_cli.ndt.prepare import load_and_prepare
 
+    check_out(out)
     cfg = load(config)
     T = read_matrix(at) if at is not None else None
     pair = Pair.make(load_and_prepare(target, cfg), load_and_prepare(source, cfg), cfg, T)
     return cfg, pair
 
 
-def _write_csv(path: Path, rows: list[dict]) -> None:
-    from ndt_cli.io import atomic
+def _table(rows: list[dict]) -> str:
     from ndt_cli.io.serialize import csv_text
 
-    atomic.write_text(path, csv_text(rows, tuple(rows[0]) if rows else ()))
-    typer.echo(f"wrote {path}")
+    return csv_text(rows, tuple(rows[0]) if rows else ())
 
 
-def _run_analysis(fn: Callable[[], None], prog: str, debug: bool) -> None:
+def _add(files: Files, name: str, content: str | bytes | None) -> None:
+    if content is not None:
+        files[name] = content
+
+
+def _run_analysis(fn: Callable[[], Files], out: Path, debug: bool) -> None:
+    """Run an experiment and publish its files together into ``out`` (the files of the other
+    experiments already there are kept)."""
     setup_logging(False, False)
-    with user_errors(prog, debug):
-        fn()
+    with user_errors("ndt-analyze", debug):
+        from ndt_cli.io.outdir import publish
+
+        files = fn()
+        publish(out, files, keep_others=True)
+    for name in files:
+        typer.echo(f"wrote {out / name}")
 
 
-@analyze_app.command("score-profile")
+@analyze_app.command("score-profile", cls=OneLineCommand)
 def score_profile(
     target: Annotated[Path, typer.Argument(help="Fixed scan.")],
     source: Annotated[Path, typer.Argument(help="Moving scan.")],
@@ -75,24 +102,26 @@ def score_profile(
 ) -> None:
     """Score of the aligned pair as the source is rotated or shifted, for 1..k slices."""
 
-    def run() -> None:
+    def run() -> Files:
         from ndt_cli.analysis import experiments as analyze
         from ndt_cli.report import plots
 
-        cfg, pair = _analysis(target, source, config, at)
+        cfg, pair = _analysis(target, source, config, at, out)
+        files: Files = {}
         if rotate:
             rows = analyze.rotation_profile(pair, cfg, cell, step_deg)
-            _write_csv(out / "score_rotation.csv", rows)
-            plots.rotation_plot(rows, out / "score_rotation.png", cell)
+            files["score_rotation.csv"] = _table(rows)
+            _add(files, "score_rotation.png", plots.rotation_plot(rows, cell))
         if translate:
             rows = analyze.translation_profile(pair, cfg, cell, x_range, y_range, step)
-            _write_csv(out / "score_translation.csv", rows)
-            plots.translation_plot(rows, out / "score_translation.png", cell)
+            files["score_translation.csv"] = _table(rows)
+            _add(files, "score_translation.png", plots.translation_plot(rows, cell))
+        return files
 
-    _run_analysis(run, "ndt-analyze", debug)
+    _run_analysis(run, out, debug)
 
 
-@analyze_app.command("basin")
+@analyze_app.command("basin", cls=OneLineCommand)
 def basin_cmd(
     target: Annotated[Path, typer.Argument(help="Fixed scan.")],
     source: Annotated[Path, typer.Argument(help="Moving scan.")],
@@ -109,22 +138,22 @@ def basin_cmd(
     """Register from many start offsets (no search) and record where each ends (fig. 17):
     one slice vs all slices, a single start per level vs restarts from +-1/2 and +-1 cell."""
 
-    def run() -> None:
+    def run() -> Files:
         from ndt_cli.analysis import experiments as analyze
         from ndt_cli.report import plots
 
-        cfg, pair = _analysis(target, source, config, at)
+        cfg, pair = _analysis(target, source, config, at, out)
         offsets = analyze.basin_offsets(max_translation, translation_step, max_yaw, yaw_step)
         rows = analyze.basin(pair, cfg, offsets, jobs=jobs)
         rates = analyze.success_rates(rows, max(translation_step, 1.0))
-        _write_csv(out / "basin.csv", rows)
-        _write_csv(out / "basin_success.csv", rates)
-        plots.basin_plot(rows, rates, out / "basin.png")
+        files: Files = {"basin.csv": _table(rows), "basin_success.csv": _table(rates)}
+        _add(files, "basin.png", plots.basin_plot(rows, rates))
+        return files
 
-    _run_analysis(run, "ndt-analyze", debug)
+    _run_analysis(run, out, debug)
 
 
-@analyze_app.command("optimizers")
+@analyze_app.command("optimizers", cls=OneLineCommand)
 def optimizers_cmd(
     target: Annotated[Path, typer.Argument(help="Fixed scan.")],
     source: Annotated[Path, typer.Argument(help="Moving scan.")],
@@ -141,16 +170,17 @@ def optimizers_cmd(
     config's cell schedule; as in the paper, the Levenberg-Marquardt variants start one level
     finer."""
 
-    def run() -> None:
+    def run() -> Files:
         from ndt_cli.analysis import experiments as analyze
         from ndt_cli.report import plots
 
-        cfg, pair = _analysis(target, source, config, at)
+        cfg, pair = _analysis(target, source, config, at, out)
         cells = cfg.grid.cell_sizes
         lm_cells = cells[1:] if len(cells) > 1 else cells
         schedules = {"newton": cells, "lm_fixed": lm_cells, "lm": lm_cells}
         rows = analyze.optimizer_traces(pair, cfg, start, schedules)
-        _write_csv(out / "optimizers.csv", rows)
-        plots.optimizer_plot(rows, out / "optimizers.png")
+        files: Files = {"optimizers.csv": _table(rows)}
+        _add(files, "optimizers.png", plots.optimizer_plot(rows))
+        return files
 
-    _run_analysis(run, "ndt-analyze", debug)
+    _run_analysis(run, out, debug)

@@ -2,52 +2,69 @@
 
 from __future__ import annotations
 
-import logging
-import sys
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from ndt_cli.cli.common import (
+    EXIT_CODES,
+    FORMATS,
     ConfigOpt,
     DebugOpt,
+    JsonOpt,
+    OneLineCommand,
+    PrintConfigOpt,
     QuietOpt,
     VerboseOpt,
+    VersionOpt,
+    check_out,
+    console,
+    load_config,
     new_app,
     setup_logging,
     user_errors,
 )
 from ndt_cli.errors import EXIT_REGISTRATION
-from ndt_cli.pipeline.executors import ExecutorKind
+from ndt_cli.pipeline.workers import ExecutorKind
+
+if TYPE_CHECKING:
+    from ndt_cli.config import Config
+    from ndt_cli.pipeline.chain import ChainResult
 
 chain_app = new_app()
 
-_CHAIN_HELP = "\n\n".join(
+_HELP = "\n\n".join(
     [
         "Register a sequence of scans along a street and chain them into one frame.",
         "Scans are sorted in natural order of their names (scan_2 before scan_10); each scan is "
         "registered against the previous readable one. The first scan (or --anchor K) defines "
         "the world frame; poses.txt holds T_world_scan of every scan.",
-        "Exit codes: 0 every link ok, 1 a link failed or is suspect (see pairs.csv), "
-        "2 bad input or config.",
-        "Examples:",
-        "  ndt-chain scans/*.laz --out street/ --jobs 2",
+        FORMATS,
+        EXIT_CODES,
+        "Examples:\n\n"
+        "  ndt-chain scans/*.laz --out street/ --jobs 2\n\n"
         "  ndt-chain scans/*.laz --out street/ --resume   (after an interruption)",
     ]
 )
+_RESUME_HINT = "interrupted: finished links are kept; run again with --resume to continue"
 
 
-@chain_app.command(help=_CHAIN_HELP, no_args_is_help=True)
+@chain_app.command(help=_HELP, cls=OneLineCommand)
 def chain(
-    scans: Annotated[list[Path], typer.Argument(help="Scan files (at least two).")],
+    scans: Annotated[list[Path] | None, typer.Argument(help="Scan files (at least two).")] = None,
     config: ConfigOpt = None,
     out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("ndt_chain"),
     jobs: Annotated[
-        int | None, typer.Option("--jobs", "-j", help="Parallel processes [default: cores].")
+        int | None,
+        typer.Option("--jobs", "-j", help="Parallel processes.", show_default="all cores"),
     ] = None,
     resume: Annotated[
-        bool, typer.Option(help="Reuse finished links whose inputs and config are unchanged.")
+        bool,
+        typer.Option(
+            "--resume", help="Reuse finished links whose inputs and config are unchanged."
+        ),
     ] = False,
     anchor: Annotated[int, typer.Option(help="Index of the scan that defines the world.")] = 0,
     executor: Annotated[
@@ -55,88 +72,96 @@ def chain(
     ] = ExecutorKind.LOCAL,
     scheduler: Annotated[
         str | None,
-        typer.Option(help="Dask scheduler address, tcp://HOST:PORT [default: a LocalCluster]."),
+        typer.Option(
+            help="Dask scheduler address, tcp://HOST:PORT.", show_default="a LocalCluster"
+        ),
     ] = None,
-    json_out: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+    print_config: PrintConfigOpt = False,
+    json_out: JsonOpt = False,
     quiet: QuietOpt = False,
     verbose: VerboseOpt = False,
     debug: DebugOpt = False,
+    version: VersionOpt = None,
 ) -> None:
     setup_logging(quiet or json_out, verbose)
-    resume_hint = "interrupted: finished links are kept; run again with --resume to continue"
-    with user_errors("ndt-chain", debug, resume_hint):
-        import time
+    opts = _Options(out, jobs, resume, anchor, executor, scheduler, not (quiet or json_out))
+    with user_errors("ndt-chain", debug, _RESUME_HINT):
+        cfg = load_config(config, print_config)
+        paths = _scans(scans or [], opts)
+        check_out(out)
+        result, runtime = _run(paths, cfg, opts)
+    _show(result, runtime, out, json_out, quiet)
+    if not result.ok:
+        raise typer.Exit(EXIT_REGISTRATION)
 
-        from ndt_cli.config import load
-        from ndt_cli.errors import ConfigError, InputError, OutputError
-        from ndt_cli.io.e57 import expand
-        from ndt_cli.pipeline.chain import run_chain
-        from ndt_cli.pipeline.executors import make_executor
-        from ndt_cli.pipeline.scans import natural_sort
-        from ndt_cli.report.chain_outputs import write_chain_outputs
-        from ndt_cli.report.topview import write_topview
 
-        cfg = load(config)
-        paths = expand(natural_sort(scans))
-        if len(paths) < 2:
-            raise InputError("ndt-chain needs at least two scans")
-        if not 0 <= anchor < len(paths):
-            raise ConfigError(f"--anchor {anchor} is not a scan index (0..{len(paths) - 1})")
-        if jobs is not None and jobs < 1:
-            raise ConfigError("--jobs must be >= 1")
-        if scheduler is not None and executor is not ExecutorKind.DASK:
-            raise ConfigError("--scheduler needs --executor dask")
-        if out.exists() and not out.is_dir():
-            raise OutputError("output path exists and is not a folder", out)
-        t0 = time.perf_counter()
-        pool = make_executor(executor, jobs, scheduler)
-        with _Progress(len(paths) - 1, enabled=not (quiet or json_out)) as advance:
-            result = run_chain(
-                paths, cfg, out, executor=pool, resume=resume, anchor=anchor, on_progress=advance
-            )
-        runtime = time.perf_counter() - t0
-        write_chain_outputs(out, result, cfg, runtime)
-        write_topview(out, result)
+@dataclass(frozen=True)
+class _Options:
+    """How the chain runs (the command's options)."""
+
+    out: Path
+    jobs: int | None
+    resume: bool
+    anchor: int
+    executor: ExecutorKind
+    scheduler: str | None
+    progress: bool
+
+
+def _scans(scans: list[Path], opts: _Options) -> list[Path]:
+    """The scans in chain order, after checking the options and that every scan can be read."""
+    from ndt_cli.errors import ConfigError, InputError
+    from ndt_cli.io.e57 import expand
+    from ndt_cli.pipeline.scans import natural_sort
+
+    paths = expand(natural_sort(scans))
+    if len(paths) < 2:
+        raise InputError("ndt-chain needs at least two scans")
+    if not 0 <= opts.anchor < len(paths):
+        raise ConfigError(f"--anchor {opts.anchor} is not a scan index (0..{len(paths) - 1})")
+    if opts.jobs is not None and opts.jobs < 1:
+        raise ConfigError("--jobs must be >= 1")
+    if opts.scheduler is not None and opts.executor is not ExecutorKind.DASK:
+        raise ConfigError("--scheduler needs --executor dask")
+    return paths
+
+
+def _run(paths: list[Path], cfg: Config, opts: _Options) -> tuple[ChainResult, float]:
+    """Run the chain with a progress display and publish its outputs; (result, seconds)."""
+    import time
+
+    from ndt_cli.cli.progress import ChainProgress
+    from ndt_cli.pipeline.chain import run_chain
+    from ndt_cli.pipeline.executors import make_executor
+    from ndt_cli.pipeline.scans import scan_names
+    from ndt_cli.report.chain_outputs import write_chain_outputs
+
+    t0 = time.perf_counter()
+    pool = make_executor(opts.executor, opts.jobs, opts.scheduler)
+    names = tuple(scan_names(paths))
+    with ChainProgress(names, len(paths) - 1, enabled=opts.progress) as advance:
+        result = run_chain(
+            paths,
+            cfg,
+            opts.out,
+            executor=pool,
+            resume=opts.resume,
+            anchor=opts.anchor,
+            on_progress=advance,
+        )
+    runtime = time.perf_counter() - t0
+    write_chain_outputs(opts.out, result, cfg, runtime)
+    return result, runtime
+
+
+def _show(result: ChainResult, runtime: float, out: Path, json_out: bool, quiet: bool) -> None:
     if json_out:
         from ndt_cli.io.serialize import to_json
         from ndt_cli.report.chain_outputs import summary
 
         typer.echo(to_json(summary(result, runtime)), nl=False)
     elif not quiet:
-        from rich.console import Console
-
         from ndt_cli.report.console import print_chain_summary
 
-        print_chain_summary(result, Console())
+        print_chain_summary(result, console())
         typer.echo(f"written to {out}/")
-    if not result.ok:
-        raise typer.Exit(EXIT_REGISTRATION)
-
-
-def _log_link(link: Any) -> None:
-    """At --verbose, one line per finished link with its per-level progress."""
-    log = logging.getLogger("ndt_cli.pipeline.chain")
-    log.debug("link %s (%s): %s", link.index, link.status, link.describe_levels() or link.reason)
-
-
-class _Progress:
-    """A rich progress bar over links, shown only on a terminal; yields the advance callback."""
-
-    def __init__(self, total: int, enabled: bool) -> None:
-        self.total = total
-        self.enabled = enabled and sys.stdout.isatty()
-        self.bar = None
-
-    def __enter__(self):
-        if not self.enabled:
-            return _log_link
-        from rich.progress import Progress
-
-        self.bar = Progress()
-        self.bar.start()
-        task = self.bar.add_task("links", total=self.total)
-        return lambda link: (self.bar.advance(task), _log_link(link))
-
-    def __exit__(self, *exc: object) -> None:
-        if self.bar is not None:
-            self.bar.stop()

@@ -1,7 +1,9 @@
-"""What every command shares: logging set-up, the error guard, the shared options.
+"""What every command shares: the app settings, ``--version``, logging, the error guard, and the
+texts and options that several commands show.
 
-Only typer and the standard library are imported here: ``--help`` must stay fast. Heavy
-modules are imported inside the commands.
+Only typer and the standard library are imported here, and help is plain click text (no rich
+rendering): ``--help`` stays as fast as importing typer. Heavy modules are imported inside the
+commands.
 """
 
 from __future__ import annotations
@@ -11,44 +13,175 @@ import logging
 import sys
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
+from typer.core import TyperCommand, TyperGroup
 
 from ndt_cli.errors import NdtError, UserInterruptError
 
-ConfigOpt = Annotated[Path | None, typer.Option("--config", "-c", help="YAML config file.")]
+try:  # typer >= 0.2x vendors click
+    from typer._click.exceptions import ClickException
+except ImportError:  # pragma: no cover - typer on the standalone click package
+    from click.exceptions import ClickException
+
+EXIT_CODES = (
+    "Exit codes: 0 success; 1 a result is not trustworthy (suspect, degenerate, not converged, "
+    "no overlap, failed; ndt-chain: any scan not ok); 2 bad input, config or output path; "
+    "130 stopped by Ctrl-C."
+)
+FORMATS = (
+    "Formats: PLY, LAS, LAZ, E57 (FILE.e57#K names scan K), PCD, and text (xyz, txt, csv, 3d: "
+    "the first three columns are x y z)."
+)
+CONFIG_HELP = (
+    "YAML config file, or the name of a shipped one (default, paper, lm, 3dtk, noisy_sensor)."
+)
+
+ConfigOpt = Annotated[str | None, typer.Option("--config", "-c", help=CONFIG_HELP)]
+PrintConfigOpt = Annotated[
+    bool,
+    typer.Option("--print-config", help="Print the effective config (commented YAML) and exit."),
+]
 QuietOpt = Annotated[bool, typer.Option("--quiet", "-q", help="Print errors only.")]
-VerboseOpt = Annotated[bool, typer.Option("--verbose", "-v", help="More log messages.")]
-DebugOpt = Annotated[bool, typer.Option(help="Show tracebacks of errors.")]
+VerboseOpt = Annotated[
+    bool, typer.Option("--verbose", "-v", help="Debug messages of ndt-cli (never of libraries).")
+]
+DebugOpt = Annotated[bool, typer.Option("--debug", help="Show tracebacks of errors.")]
+JsonOpt = Annotated[bool, typer.Option("--json", help="Print the result as JSON on stdout.")]
+
+PROGRESS = "ndt_cli.progress"  # lines shown as the work goes on (not held back)
+_log = logging.getLogger("ndt_cli")
+
+
+def _print_version(ctx: typer.Context, value: bool) -> None:
+    if value:
+        from ndt_cli import __version__
+
+        typer.echo(f"{ctx.find_root().info_name} {__version__}")
+        raise typer.Exit()
+
+
+VersionOpt = Annotated[
+    bool | None,
+    typer.Option(
+        "--version",
+        "-V",
+        callback=_print_version,
+        is_eager=True,
+        help="Print the version and exit.",
+    ),
+]
+
+
+def _one_line_main(main: Any, self: Any, args: Any, prog_name: Any, kw: dict) -> Any:
+    """Run a click command; a usage error (bad option value, unknown option, unreadable path
+    given to click) is one line on stderr and exit code 2, as every other user error."""
+    standalone = kw.pop("standalone_mode", True)
+    try:
+        value = main(self, args, prog_name, standalone_mode=False, **kw)
+    except ClickException as exc:
+        if type(exc).__name__ == "NoArgsIsHelpError":  # a bare group command: its help
+            exc.show()
+            sys.exit(2)
+        ctx = getattr(exc, "ctx", None)
+        prog = ctx.find_root().info_name if ctx is not None else (prog_name or "ndt-cli")
+        typer.echo(f"{prog}: error: {' '.join(exc.format_message().split())}", err=True)
+        sys.exit(exc.exit_code)
+    except typer.Abort:
+        typer.echo("interrupted", err=True)
+        sys.exit(130)
+    if standalone:
+        sys.exit(value if isinstance(value, int) else 0)
+    return value
+
+
+class OneLineCommand(TyperCommand):
+    """A command whose usage errors are one line (see :func:`_one_line_main`)."""
+
+    def main(self, args: Any = None, prog_name: str | None = None, **kw: Any) -> Any:
+        return _one_line_main(TyperCommand.main, self, args, prog_name, kw)
+
+
+class OneLineGroup(TyperGroup):
+    """A group of commands whose usage errors are one line."""
+
+    def main(self, args: Any = None, prog_name: str | None = None, **kw: Any) -> Any:
+        return _one_line_main(TyperGroup.main, self, args, prog_name, kw)
 
 
 def new_app(**kwargs: object) -> typer.Typer:
-    """A Typer app with the project's settings (no pretty tracebacks: errors are one line)."""
-    return typer.Typer(add_completion=False, pretty_exceptions_enable=False, **kwargs)
+    """A Typer app with the project's settings: completion available, plain help, one-line
+    errors instead of usage blocks or pretty tracebacks. Register its commands with
+    ``cls=OneLineCommand``."""
+    return typer.Typer(
+        cls=OneLineGroup,
+        add_completion=True,
+        pretty_exceptions_enable=False,
+        rich_markup_mode=None,
+        context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+        **kwargs,
+    )
+
+
+class _Held(logging.Handler):
+    """Holds the library's messages until the command ends; on a user error they are dropped,
+    so that the error is the only line."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.records: list[logging.LogRecord] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append(record)
+
+
+class _Format(logging.Formatter):
+    def format(self, record: logging.LogRecord) -> str:
+        text = record.getMessage()
+        return text if record.levelno == logging.INFO else f"{record.levelname.lower()}: {text}"
+
+
+_held = _Held()
+_shown = logging.StreamHandler(sys.stderr)
 
 
 def setup_logging(quiet: bool, verbose: bool) -> None:
+    """ndt-cli's messages on stderr (INFO; DEBUG with ``verbose``; warnings only when
+    ``quiet``); progress lines at once, other messages when the command ends; nothing from
+    third-party libraries (they fail through one-line errors instead)."""
+    logging.getLogger().setLevel(logging.CRITICAL + 1)
     level = logging.WARNING if quiet else logging.DEBUG if verbose else logging.INFO
-    logging.basicConfig(
-        level=level, format="%(levelname)s: %(message)s", stream=sys.stderr, force=True
-    )
-    # libraries log their own failures, which reach the user as one InputError line instead
-    for name in ("laspy", "numba", "matplotlib", "pye57"):
-        logging.getLogger(name).setLevel(logging.DEBUG if verbose else logging.CRITICAL)
-    for name in ("distributed", "dask"):
-        logging.getLogger(name).setLevel(logging.DEBUG if verbose else logging.ERROR)
+    global _shown
+    _shown = logging.StreamHandler(sys.stderr)
+    _shown.setFormatter(_Format())
+    _held.records.clear()
+    for name, handler in (("ndt_cli", _held), (PROGRESS, _shown)):
+        logger = logging.getLogger(name)
+        logger.handlers[:] = [handler]
+        logger.setLevel(level)
+        logger.propagate = False
+
+
+def flush_messages() -> None:
+    """Print the held messages (the command ended without a user error)."""
+    for record in _held.records:
+        if record.levelno >= _log.getEffectiveLevel():
+            _shown.handle(record)
+    _held.records.clear()
 
 
 def fail(exc: NdtError, prog: str) -> typer.Exit:
     """Print the one-line error and return the exit to raise."""
+    _held.records.clear()
     typer.echo(f"{prog}: error: {exc}", err=True)
     return typer.Exit(exc.exit_code)
 
 
 @contextlib.contextmanager
 def user_errors(prog: str, debug: bool, interrupted: str = "interrupted") -> Iterator[None]:
-    """Turn user errors and Ctrl-C into one line on stderr and the documented exit code."""
+    """Turn user errors and Ctrl-C into one line on stderr and the documented exit code; print
+    the held messages when the block ends without one."""
     try:
         yield
     except KeyboardInterrupt:
@@ -57,3 +190,33 @@ def user_errors(prog: str, debug: bool, interrupted: str = "interrupted") -> Ite
         if debug:
             raise
         raise fail(exc, prog) from None
+    flush_messages()
+
+
+def load_config(config: str | None, print_config: bool) -> object:
+    """The effective config; with ``print_config`` it is printed (commented YAML) and the
+    command ends."""
+    from ndt_cli.config import load
+    from ndt_cli.config.printing import commented_yaml
+
+    cfg = load(config)
+    if print_config:
+        origin = "the defaults" if config is None else f"the defaults merged with {config}"
+        typer.echo(commented_yaml(cfg, origin), nl=False)
+        raise typer.Exit()
+    return cfg
+
+
+def console(stderr: bool = False) -> object:
+    """A rich console: on a terminal as wide as it; otherwise never cutting a table."""
+    from rich.console import Console
+
+    stream = sys.stderr if stderr else sys.stdout
+    return Console(file=stream, width=None if stream.isatty() else 10_000, soft_wrap=True)
+
+
+def check_out(out: Path) -> Path:
+    """The output folder, checked before any work: new, empty, or an earlier result."""
+    from ndt_cli.io.outdir import check_output_folder
+
+    return check_output_folder(out)

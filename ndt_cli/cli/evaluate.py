@@ -7,42 +7,80 @@ from typing import Annotated
 
 import typer
 
-from ndt_cli.cli.common import DebugOpt, new_app, setup_logging, user_errors
+from ndt_cli.cli.common import (
+    DebugOpt,
+    JsonOpt,
+    OneLineCommand,
+    QuietOpt,
+    VersionOpt,
+    check_out,
+    console,
+    new_app,
+    setup_logging,
+    user_errors,
+)
 
 eval_app = new_app()
 
+_HELP = "\n\n".join(
+    [
+        "Rotation (deg) and translation (m) error of every link of an ndt-chain or ndt-register "
+        "result against reference poses, the success rates at 2 deg / 10 cm and 0.1 deg / 2 cm, "
+        "and the end-of-chain drift. The result folder is only read; --out writes eval.csv and "
+        "eval.json into a folder of their own.",
+        "Exit codes: 0 success; 2 bad input (no result folder, a reference that names no scan "
+        "of the result, a bad reference line) or an unwritable --out.",
+        "Example:\n\n  ndt-eval street/ --gt poses_T_world_scan.txt --out street_eval/",
+    ]
+)
 
-@eval_app.command(no_args_is_help=True)
+
+@eval_app.command(help=_HELP, cls=OneLineCommand)
 def evaluate_cmd(
-    result_dir: Annotated[Path, typer.Argument(help="Output folder of ndt-chain or ndt-register.")],
+    result_dir: Annotated[
+        Path | None, typer.Argument(help="Output folder of ndt-chain or ndt-register.")
+    ] = None,
     gt: Annotated[
-        Path,
+        Path | None,
         typer.Option(
             help="Reference: 'name' + 16 numbers (T_world_scan) or 'target source' + "
             "16 numbers (T_target_source) per line."
         ),
-    ],
-    json_out: Annotated[bool, typer.Option("--json", help="Print the evaluation as JSON.")] = False,
+    ] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", "-o", help="Write eval.csv and eval.json into this folder."),
+    ] = None,
+    json_out: JsonOpt = False,
+    quiet: QuietOpt = False,
     debug: DebugOpt = False,
+    version: VersionOpt = None,
 ) -> None:
-    """Rotation (deg) and translation (m) error of every link against a reference, success rates
-    at 2 deg / 10 cm and 0.1 deg / 2 cm, and the end-of-chain drift. Writes eval.csv and
-    eval.json into RESULT_DIR."""
-    setup_logging(json_out, False)
+    setup_logging(quiet or json_out, False)
     with user_errors("ndt-eval", debug):
         from ndt_cli.analysis.accuracy import compare_with_reference
-        from ndt_cli.io import atomic
-        from ndt_cli.io.serialize import csv_text, to_json
+        from ndt_cli.errors import InputError
 
+        if result_dir is None or gt is None:
+            raise InputError("give RESULT_DIR and --gt POSES (see ndt-eval --help)")
+        if out is not None:
+            check_out(out)
         ev = compare_with_reference(result_dir, gt)
-        columns = ("target", "source", "rotation_error_deg", "translation_error_m")
-        atomic.write_text(result_dir / "eval.csv", csv_text(ev.links, columns))
-        atomic.write_text(result_dir / "eval.json", to_json(ev.to_dict()))
+        if out is not None:
+            _publish(ev, out)
     if json_out:
+        from ndt_cli.io.serialize import to_json
+
         typer.echo(to_json(ev.to_dict()), nl=False)
-        return
-    from rich.console import Console
+    elif not quiet:
+        from ndt_cli.report.console import print_evaluation
 
-    from ndt_cli.report.console import print_evaluation
+        print_evaluation(ev, console())
 
-    print_evaluation(ev, Console())
+
+def _publish(ev: object, out: Path) -> None:
+    from ndt_cli.io.outdir import publish
+    from ndt_cli.io.serialize import csv_text, to_json
+
+    columns = ("target", "source", "rotation_error_deg", "translation_error_m")
+    publish(out, {"eval.csv": csv_text(ev.links, columns), "eval.json": to_json(ev.to_dict())})

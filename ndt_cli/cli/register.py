@@ -8,69 +8,67 @@ from typing import Annotated
 import typer
 
 from ndt_cli.cli.common import (
+    EXIT_CODES,
+    FORMATS,
     ConfigOpt,
     DebugOpt,
+    JsonOpt,
+    OneLineCommand,
+    PrintConfigOpt,
     QuietOpt,
     VerboseOpt,
+    VersionOpt,
+    check_out,
+    console,
+    load_config,
     new_app,
     setup_logging,
     user_errors,
 )
-from ndt_cli.errors import EXIT_REGISTRATION
+from ndt_cli.errors import EXIT_REGISTRATION, InputError
 
 register_app = new_app()
 
-_REGISTER_HELP = "\n\n".join(
+_HELP = "\n\n".join(
     [
         "Register SOURCE onto TARGET with multi-slice 2D NDT; no initial guess is needed.",
         "TARGET stays fixed and SOURCE is moved: the result T_target_source (4x4, written to "
         "T_target_source.txt) maps source points into the target frame, p_target = T @ p_source.",
-        "Formats: PLY, LAS, LAZ, PCD, xyz/txt/csv (first three columns are x y z, metres). "
-        "Exit codes: 0 ok, 1 registration failed (no overlap, not converged), "
-        "2 bad input or config.",
-        "Examples:",
-        "  ndt-register scan_00.laz scan_01.laz --out results/",
-        "  ndt-register a.ply b.ply --config configs/default.yaml --json > result.json",
+        FORMATS,
+        EXIT_CODES,
+        "Examples:\n\n"
+        "  ndt-register scan_00.laz scan_01.laz --out results/\n\n"
+        "  ndt-register a.ply b.ply --config paper --json > result.json\n\n"
+        "  ndt-register --print-config --config 3dtk > my.yaml",
     ]
 )
 
 
-@register_app.command(help=_REGISTER_HELP, no_args_is_help=True)
+@register_app.command(help=_HELP, cls=OneLineCommand)
 def register(
-    target: Annotated[Path, typer.Argument(help="Fixed scan (its frame is the result's frame).")],
-    source: Annotated[Path, typer.Argument(help="Moving scan.")],
+    target: Annotated[
+        Path | None, typer.Argument(help="Fixed scan (its frame is the result's frame).")
+    ] = None,
+    source: Annotated[Path | None, typer.Argument(help="Moving scan.")] = None,
     config: ConfigOpt = None,
     init: Annotated[
         Path | None, typer.Option(help="Initial guess of T_target_source: a 4x4 text file.")
     ] = None,
     out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("ndt_results"),
-    json_out: Annotated[
-        bool, typer.Option("--json", help="Print the result as JSON on stdout.")
-    ] = False,
+    print_config: PrintConfigOpt = False,
+    json_out: JsonOpt = False,
     quiet: QuietOpt = False,
     verbose: VerboseOpt = False,
     debug: DebugOpt = False,
+    version: VersionOpt = None,
 ) -> None:
     setup_logging(quiet or json_out, verbose)
     with user_errors("ndt-register", debug):
-        from ndt_cli.config import load
-        from ndt_cli.io.matrices import read_matrix
-        from ndt_cli.io.serialize import to_json
-        from ndt_cli.ndt.register import register as run
-        from ndt_cli.report.console import print_summary
-        from ndt_cli.report.register_outputs import write_register_outputs
-
-        cfg = load(config)
-        T_init = read_matrix(init) if init is not None else None
-        result = run(target, source, cfg, init=T_init)
-        write_register_outputs(out, result, cfg)
-    if json_out:
-        typer.echo(to_json(result.to_dict()), nl=False)
-    elif not quiet:
-        from rich.console import Console
-
-        print_summary(result, Console())
-        typer.echo(f"written to {out}/")
+        cfg = load_config(config, print_config)
+        if target is None or source is None:
+            raise InputError("give TARGET and SOURCE (see ndt-register --help)")
+        result = _run(target, source, cfg, init, out)
+    _show(result, out, json_out, quiet)
     if not result.ok:
         reasons = "; ".join(result.warnings)
         typer.echo(
@@ -78,3 +76,33 @@ def register(
             err=True,
         )
         raise typer.Exit(EXIT_REGISTRATION)
+
+
+def _run(target: Path, source: Path, cfg: object, init: Path | None, out: Path) -> object:
+    """Check every input and the output before the work, register, publish the outputs."""
+    from ndt_cli.io.matrices import read_matrix
+    from ndt_cli.io.points import check_readable
+
+    check_out(out)
+    check_readable(target)
+    check_readable(source)
+    T_init = read_matrix(init) if init is not None else None
+
+    from ndt_cli.ndt.register import register as run  # the kernels: only once inputs are good
+    from ndt_cli.report.register_outputs import write_register_outputs
+
+    result = run(target, source, cfg, init=T_init)
+    write_register_outputs(out, result, cfg)
+    return result
+
+
+def _show(result: object, out: Path, json_out: bool, quiet: bool) -> None:
+    if json_out:
+        from ndt_cli.io.serialize import to_json
+
+        typer.echo(to_json(result.to_dict()), nl=False)
+    elif not quiet:
+        from ndt_cli.report.console import print_summary
+
+        print_summary(result, console())
+        typer.echo(f"written to {out}/")

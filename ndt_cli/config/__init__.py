@@ -5,6 +5,7 @@ naming the key. ``configs/default.yaml`` documents every key with its unit.
 """
 
 from ndt_cli.config.loading import dump, from_dict, load
+from ndt_cli.config.rules import axes_matrix
 from ndt_cli.config.schema import (
     Config,
     GridConfig,
@@ -17,7 +18,6 @@ from ndt_cli.config.schema import (
     SearchConfig,
     SlicesConfig,
     SourceConfig,
-    axes_matrix,
 )
 
 __all__ = [

@@ -91,6 +91,16 @@ def _index(path: Path, index: int | None, count: int, spec: str) -> int:
     return index
 
 
+def check_scan(spec: str | Path) -> None:
+    """Raise unless the file opens as E57 and holds the scan that ``spec`` names."""
+    path, index = split_spec(spec)
+    e57 = _open(path)
+    try:
+        _index(path, index, int(e57.scan_count), str(spec))
+    finally:
+        e57.close()
+
+
 def read_xyz(spec: str | Path) -> np.ndarray:
     """(N,3) float64 points of one scan, in the scan's own frame (header pose not applied)."""
     path, index = split_spec(spec)

@@ -8,6 +8,7 @@ own (metres unless the file says otherwise), float64, before any filtering.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -17,6 +18,8 @@ import plyfile
 import pypcd4
 
 from ndt_cli.errors import InputError
+
+logger = logging.getLogger(__name__)
 
 LAS_CHUNK_SIZE = 2_000_000
 """Points per chunk when reading LAS/LAZ (bounds the memory used by laspy's point records)."""
@@ -30,6 +33,10 @@ class PointReader:
     def count(self, path: Path) -> int | None:
         """Points the header announces, or None for formats without a header count."""
         return None
+
+    def check(self, path: Path) -> None:
+        """Read what a quick look needs (the header) and raise if the file cannot be used."""
+        self.count(path)
 
     def iter_xyz(self, path: Path, chunk_size: int | None = None) -> Iterator[np.ndarray]:
         """Raw (m,3) float64 chunks in file order (one chunk unless the format streams)."""
@@ -62,6 +69,7 @@ class LasReader(PointReader):
 
     def count(self, path: Path) -> int:
         with laspy.open(path) as reader:
+            _warn_extra_records(reader.header, path)
             return int(reader.header.point_count)
 
     def iter_xyz(self, path: Path, chunk_size: int | None = None) -> Iterator[np.ndarray]:
@@ -91,7 +99,8 @@ def _check_las_size(header: laspy.LasHeader, path: Path) -> None:
     if header.are_points_compressed:
         return
     n = int(header.point_count)
-    needed = header.offset_to_point_data + n * header.point_format.size
+    record = header.point_format.size
+    needed = header.offset_to_point_data + n * record
     size = path.stat().st_size
     if size < needed:
         raise InputError(
@@ -101,15 +110,30 @@ def _check_las_size(header: laspy.LasHeader, path: Path) -> None:
         )
 
 
+def _warn_extra_records(header: laspy.LasHeader, path: Path) -> None:
+    """Report point records beyond the header's count (a header that undercounts its file)."""
+    if header.are_points_compressed:
+        return
+    n, record = int(header.point_count), header.point_format.size
+    needed = header.offset_to_point_data + n * record
+    evlr = int(getattr(header, "start_of_first_evlr", 0) or 0)
+    end = evlr if evlr >= needed else path.stat().st_size
+    if end - needed >= record:
+        logger.warning(
+            "%s: the file holds %d more point records than its header's %d; only those are read",
+            path,
+            (end - needed) // record,
+            n,
+        )
+
+
 class PcdReader(PointReader):
     """PCD (ascii, binary, binary_compressed) via pypcd4: fields x, y, z."""
 
     suffixes = (".pcd",)
 
     def read_xyz(self, path: Path) -> np.ndarray:
-        with path.open("rb") as fh:
-            head = fh.read(16384)
-        if b"FIELDS" not in head or b"DATA" not in head:
+        if not _pcd_header(path):
             raise InputError("not a PCD file (no FIELDS/DATA header)", path)
         cloud = pypcd4.PointCloud.from_path(path)
         require_xyz(cloud.fields, path)
@@ -123,10 +147,29 @@ class PcdReader(PointReader):
         return stack_xyz(data)
 
 
+def _pcd_header(path: Path, max_lines: int = 100_000) -> bool:
+    """Whether the file starts with a PCD header (comments of any length, then FIELDS ... DATA)."""
+    fields = False
+    with path.open("rb") as fh:
+        for _, line in zip(range(max_lines), fh, strict=False):
+            word = line.split(maxsplit=1)[0].upper() if line.split() else b""
+            if word.startswith(b"#") or not word:
+                continue
+            fields |= word == b"FIELDS"
+            if word == b"DATA":
+                return fields
+    return False
+
+
 class E57Reader(PointReader):
     """E57 scans (optional pye57); ``FILE.e57#K`` names scan K, see :mod:`ndt_cli.io.e57`."""
 
     suffixes = (".e57",)
+
+    def check(self, path: Path) -> None:
+        from ndt_cli.io import e57
+
+        e57.check_scan(path)
 
     def read_xyz(self, path: Path) -> np.ndarray:
         from ndt_cli.io import e57

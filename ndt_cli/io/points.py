@@ -86,23 +86,35 @@ def reader_for(path: Path) -> PointReader:
 
 
 def _open(path: str | Path) -> tuple[Path, PointReader]:
-    """The path and its reader, after the checks every format shares."""
+    """The path and its reader, after the checks every format shares: the file exists, is a
+    regular file (not a folder, FIFO or device), can be read and is not empty."""
     from ndt_cli.io.e57 import split_spec
 
     p = Path(path)
     f = split_spec(p)[0]  # 'scans.e57#3' names scan 3 of scans.e57
-    if not f.exists():
-        raise InputError("file not found", p)
-    if f.is_dir():
-        raise InputError("is a directory, not a point file", p)
-    reader = reader_for(f)
     try:
-        empty = f.stat().st_size == 0
+        if not f.exists():
+            raise InputError("file not found", p)
+        if f.is_dir():
+            raise InputError("is a directory, not a point file", p)
+        if not f.is_file():
+            raise InputError("is not a regular file (a FIFO, socket or device?)", p)
+        reader = reader_for(f)
+        with open(f, "rb") as fh:
+            empty = not fh.read(1)
     except OSError as exc:
-        raise InputError(f"cannot read ({exc.strerror or one_line(exc)})", p) from exc
+        raise InputError(f"cannot read ({exc.strerror or one_line(exc)})", p) from None
     if empty:
         raise InputError("file is empty", p)
     return p, reader
+
+
+def check_readable(path: str | Path) -> None:
+    """Raise the file's one-line :class:`InputError` now if it cannot be opened as a point
+    file (missing, unreadable, unknown format, empty, a broken header), before any heavy work."""
+    p, reader = _open(path)
+    with _file_errors(p):
+        reader.check(p)
 
 
 def one_line(exc: BaseException, limit: int = 160) -> str:

@@ -4,7 +4,8 @@ Each finer level restarts every candidate from its previous solution and from a 
 +-1/2 and +-1 cell offsets, and keeps its best. Over the three finest levels each candidate
 collects evidence: its score times its mean score per matched point, relative to the best
 candidate. The candidate with the most evidence wins; the second-best distinct one's share is
-the ambiguity that the quality gate checks.
+the ambiguity that the quality gate checks. Every schedule ends at 2 m and 1 m cells
+(:func:`with_verification`), whatever the configured one.
 """
 
 from __future__ import annotations
@@ -24,6 +25,19 @@ from ndt_cli.ndt.result import Candidate, LevelStats
 from ndt_cli.ndt.search import distinct_indices
 
 EVIDENCE_LEVELS = 3  # finest levels whose fit-weighted scores decide between candidates
+VERIFY_CELLS = (2.0, 1.0)  # m: every schedule ends with these, so that candidates are compared
+# (and the winner judged) at a resolution that tells a street from the same street slid by a bay
+
+
+def with_verification(schedule: Sequence[float]) -> tuple[float, ...]:
+    """``schedule`` followed by the verification cells finer than its finest cell.
+
+    A schedule that stops at 5 m (or at the paper's 25 m) cannot tell the true pose from the
+    street slid by one facade bay: both fit 5 m cells about as well. The winner is therefore
+    always chosen at 2 m and 1 m cells too, whatever the configured schedule.
+    """
+    finest = min(schedule)
+    return (*schedule, *(c for c in VERIFY_CELLS if c < finest))
 
 
 def restart_offsets(cell: float, enabled: bool) -> np.ndarray:

@@ -21,6 +21,7 @@ from ndt_cli.ndt.result import LevelStats
 from ndt_cli.ndt.slicing import subsample, voxel_filter_2d
 
 VOXEL_PER_CELL = 0.1  # source points of a level are thinned to a tenth of its cell
+GATE_CELL = 1.0  # m: the quality gate judges every result on 1 m cells built with the defaults
 
 
 class TargetMaps:
@@ -108,3 +109,21 @@ def level_stats(
         bool(res.converged[winner]),
         time.perf_counter() - t0,
     )
+
+
+def gate_inputs(
+    maps: TargetMaps,
+    sampler: SourceSampler,
+    target_slices: Sequence[np.ndarray],
+    source_slices: Sequence[np.ndarray],
+    grid: GridConfig,
+    source: SourceConfig,
+) -> tuple[NDTMap, SourcePoints]:
+    """The map and points on which the quality gate judges a result: 1 m cells and the default
+    grid and thinning settings, whatever the configuration (the gate's thresholds mean the same
+    for every config; a config with huge cell variances cannot make a poor fit look good)."""
+    default_grid = GridConfig(cell_sizes=grid.cell_sizes)
+    if grid == default_grid and source == SourceConfig():
+        return maps(GATE_CELL), sampler.fine
+    fixed = TargetMaps(target_slices, GridConfig(cell_sizes=(GATE_CELL,)))
+    return fixed(GATE_CELL), SourceSampler(source_slices, SourceConfig()).fine

@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ndt_cli.config.schema import Config, GroundConfig, InputConfig, SlicesConfig, axes_matrix
+from ndt_cli.config.rules import axes_matrix
+from ndt_cli.config.schema import Config, GroundConfig, InputConfig, SlicesConfig
 from ndt_cli.core.geometry import VoxelThinner, dominant_up
 from ndt_cli.core.transforms import (
     levelling_rotation,

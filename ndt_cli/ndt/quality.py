@@ -3,8 +3,10 @@
 A converged result is ``degenerate`` when the smaller over the larger eigenvalue of the NDT
 Hessian's translation block, or of ICP's translation information once rotation is free, is below
 ``quality.min_constraint_ratio``; it is ``suspect`` when its score per point, overlap or
-ambiguity misses the thresholds of ``quality``. The order of precedence: ``no_overlap``,
-``not_converged``, ``degenerate``, ``suspect``, ``ok``.
+ambiguity misses the thresholds of ``quality``, or when ICP moved the pose to where the slices
+fit clearly worse. Every measure is taken on 1 m cells built with the default grid settings
+(:func:`~ndt_cli.ndt.levels.gate_inputs`), whatever the configuration. The order of
+precedence: ``no_overlap``, ``not_converged``, ``degenerate``, ``suspect``, ``ok``.
 """
 
 from __future__ import annotations
@@ -19,6 +21,8 @@ from ndt_cli.ndt.grid import NDTMap
 from ndt_cli.ndt.kernels import HESS, MATCHED, SCORE, SourcePoints, sym3
 from ndt_cli.ndt.refine import Refinement
 from ndt_cli.ndt.result import Status
+
+ICP_KEEPS = 0.8  # a refined pose must keep this share of the NDT pose's score on the gate map
 
 
 @dataclass(frozen=True)
@@ -108,12 +112,23 @@ class Verdict:
 
 
 def judge(
-    fit: Fit, converged: bool, refined: Refinement, level: np.ndarray, q: QualityConfig
+    fit: Fit,
+    converged: bool,
+    refined: Refinement,
+    level: np.ndarray,
+    q: QualityConfig,
+    after: Fit | None = None,
 ) -> Verdict:
-    """The verdict on a registration, in the order of precedence of the module docstring."""
+    """The verdict on a registration, in the order of precedence of the module docstring.
+    ``after``: the fit of the pose after ICP (same map and points as ``fit``), if ICP ran."""
     warnings, weak = ndt_warnings(fit, q)
     more, weak_icp = icp_warnings(refined, level, q)
     warnings += more
+    if after is not None and not refined.rejected and after.score < ICP_KEEPS * fit.score:
+        warnings.append(
+            f"ICP moved the pose to where the slices fit worse (score per point "
+            f"{fit.per_point:.3f} -> {after.per_point:.3f})"
+        )
     weak = weak if weak is not None else weak_icp
     if fit.score <= 0.0:
         status = Status.NO_OVERLAP

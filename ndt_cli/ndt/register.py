@@ -26,8 +26,8 @@ import numpy as np
 from ndt_cli.config.schema import Config
 from ndt_cli.core.transforms import pose2d_matrix, yaw_of
 from ndt_cli.ndt.backend import NUMBA, Kernels
-from ndt_cli.ndt.coarse_to_fine import Ranked, coarse_to_fine, rank
-from ndt_cli.ndt.levels import SourceSampler, TargetMaps
+from ndt_cli.ndt.coarse_to_fine import Ranked, coarse_to_fine, rank, with_verification
+from ndt_cli.ndt.levels import SourceSampler, TargetMaps, gate_inputs
 from ndt_cli.ndt.prepare import PreparedScan, load_and_prepare
 from ndt_cli.ndt.quality import Fit, Verdict, judge, measure_fit
 from ndt_cli.ndt.refine import Refinement, refine_pose
@@ -53,6 +53,12 @@ def _starts(
         target, source, maps, sampler, cells[0], cfg.search, cfg.optimizer, kernels
     )
     return found.candidates, [found.level], cells[1:] if len(cells) > 1 else cells
+
+
+def _planar(target: PreparedScan, source: PreparedScan, T: np.ndarray) -> np.ndarray:
+    """(tx, ty, yaw) of a 4x4 T_target_source between the scans' reduced, levelled frames."""
+    L = target.to_local() @ T @ source.from_local()
+    return np.array([L[0, 3], L[1, 3], yaw_of(L)])
 
 
 def _refine(
@@ -98,15 +104,21 @@ def register_prepared(
     maps = TargetMaps(target.slices, cfg.grid)
     sampler = SourceSampler(source.slices, cfg.source)
     candidates, levels, schedule = _starts(target, source, maps, sampler, cfg, init, kernels)
+    schedule = with_verification(schedule)
     refined = coarse_to_fine(
         candidates, schedule, maps, sampler, cfg.optimizer, cfg.search.refine_offsets, kernels
     )
     ranked = rank(refined, schedule[-1])
-    fit = measure_fit(maps(schedule[-1]), sampler.fine, ranked.poses[0], ranked.ambiguity, kernels)
+    gate_map, gate_points = gate_inputs(
+        maps, sampler, target.slices, source.slices, cfg.grid, cfg.source
+    )
+    fit = measure_fit(gate_map, gate_points, ranked.poses[0], ranked.ambiguity, kernels)
     T = target.from_local() @ pose2d_matrix(*ranked.poses[0]) @ source.to_local()
     t_ndt = time.perf_counter() - t_start
     refinement = _refine(target, source, T, fit.score > 0.0 and refined.converged, cfg)
-    verdict = judge(fit, refined.converged, refinement, target.level, cfg.quality)
+    moved = _planar(target, source, refinement.T) if refinement.icp is not None else None
+    after = None if moved is None else measure_fit(gate_map, gate_points, moved, 0.0, kernels)
+    verdict = judge(fit, refined.converged, refinement, target.level, cfg.quality, after)
     per_slice = tuple(int(n) for n in sampler.fine.per_slice(len(source.slices)))
     stages = _Stages(
         (*levels, *refined.levels), refined.converged, ranked, fit, refinement, verdict, per_slice

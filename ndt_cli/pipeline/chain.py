@@ -68,12 +68,12 @@ def plan_links(n_scans: int, unreadable: set[int]) -> list[tuple[int, int]]:
 def compose_poses(n_scans: int, links: Sequence[Link], anchor: int) -> list[np.ndarray | None]:
     """``T_world_scan`` per scan from the links (world = the anchor scan's frame).
 
-    A link without a transform (failed) leaves its source without a pose; scans that were
-    registered against a scan without a pose get none either.
+    Only ok links carry a pose: a link that failed or is not ok (suspect, degenerate, ...)
+    leaves its source without one, and so are the scans registered against a scan without one.
     """
     poses: list[np.ndarray | None] = [None] * n_scans
     poses[anchor] = np.eye(4)
-    with_T = [link for link in links if link.T_target_source is not None]
+    with_T = [link for link in links if link.ok]
     for link in sorted(with_T, key=lambda k: k.source):  # forward: T_w_j = T_w_i @ T_i_j
         if link.source > anchor and poses[link.target] is not None:
             poses[link.source] = poses[link.target] @ link.T_target_source

@@ -8,18 +8,12 @@ An executor runs a dict of tasks (:data:`~ndt_cli.pipeline.workers.Task`) and yi
 from __future__ import annotations
 
 from collections.abc import Hashable, Iterator
-from enum import StrEnum
 from typing import Any, Protocol
 
 from ndt_cli.pipeline.local_pool import WorkerPool
-from ndt_cli.pipeline.workers import Task, default_jobs, threads_per_job
+from ndt_cli.pipeline.workers import ExecutorKind, Task, default_jobs, threads_per_job
 
-
-class ExecutorKind(StrEnum):
-    """``local``: processes on this machine; ``dask``: a Dask cluster."""
-
-    LOCAL = "local"
-    DASK = "dask"
+__all__ = ["Executor", "ExecutorKind", "make_executor"]
 
 
 class Executor(Protocol):

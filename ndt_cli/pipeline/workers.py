@@ -8,9 +8,17 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
+from enum import StrEnum
 from typing import Any
 
 Task = Callable[[], Any]
+
+
+class ExecutorKind(StrEnum):
+    """``local``: processes on this machine; ``dask``: a Dask cluster."""
+
+    LOCAL = "local"
+    DASK = "dask"
 
 
 def threads_per_job(jobs: int) -> int:

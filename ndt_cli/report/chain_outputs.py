@@ -1,6 +1,6 @@
 """Outputs of ``ndt-chain``: pairs.csv, poses.csv, poses.txt, one T_<target>_<source>.txt per
-link, config_used.yaml, summary.json and (E57 input) e57_header_poses.txt. All written
-atomically."""
+link, config_used.yaml, summary.json, topview.png and (E57 input) e57_header_poses.txt, published
+together (:func:`ndt_cli.io.outdir.publish`)."""
 
 from __future__ import annotations
 
@@ -9,13 +9,14 @@ from typing import Any
 
 from ndt_cli.config.loading import dump
 from ndt_cli.config.schema import Config
-from ndt_cli.io import atomic
 from ndt_cli.io.matrices import format_matrix, format_pose_line
+from ndt_cli.io.outdir import publish
 from ndt_cli.io.serialize import csv_text, to_json
 from ndt_cli.ndt.result import Status
 from ndt_cli.pipeline.chain import ChainResult
 from ndt_cli.pipeline.scans import link_file_name
 from ndt_cli.report.tables import PAIR_COLUMNS, POSE_COLUMNS, pair_row, pose_row
+from ndt_cli.report.topview import topview_png
 
 
 def summary(result: ChainResult, runtime_s: float) -> dict[str, Any]:
@@ -91,6 +92,10 @@ def chain_files(result: ChainResult, cfg: Config, runtime_s: float) -> dict[str,
 
 
 def write_chain_outputs(out: Path, result: ChainResult, cfg: Config, runtime_s: float) -> None:
-    """Write every chain output file into ``out``."""
-    for name, text in chain_files(result, cfg, runtime_s).items():
-        atomic.write_text(Path(out) / name, text)
+    """Publish every chain output (and the top view, with matplotlib) as the content of
+    ``out``, all together; the links of the run are kept for ``--resume``."""
+    files: dict[str, str | bytes] = dict(chain_files(result, cfg, runtime_s))
+    png = topview_png(result)
+    if png is not None:
+        files["topview.png"] = png
+    publish(Path(out), files)

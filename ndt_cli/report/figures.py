@@ -1,12 +1,9 @@
-"""matplotlib, when it is installed (extra ``[plot]``), and atomic PNG writing."""
+"""matplotlib, when it is installed (extra ``[plot]``), and figures as PNG bytes."""
 
 from __future__ import annotations
 
 import logging
-from pathlib import Path
 from typing import Any
-
-from ndt_cli.io import atomic
 
 log = logging.getLogger(__name__)
 
@@ -24,11 +21,13 @@ def pyplot() -> Any | None:
     return plt
 
 
-def save_png(fig: Any, path: Path, dpi: int | None = None) -> Path:
-    """Write a figure atomically as PNG and close it."""
+def png_bytes(fig: Any, dpi: int | None = None) -> bytes:
+    """A figure as PNG bytes; the figure is closed."""
+    import io
+
     import matplotlib.pyplot as plt
 
-    with atomic.atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", bbox_inches="tight", dpi=dpi)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", bbox_inches="tight", dpi=dpi)
     plt.close(fig)
-    return path
+    return buf.getvalue()

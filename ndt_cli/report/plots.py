@@ -2,16 +2,15 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ndt_cli.report.figures import png_bytes
 from ndt_cli.report.figures import pyplot as _pyplot
-from ndt_cli.report.figures import save_png
 
 
-def rotation_plot(rows: list[dict[str, Any]], path: Path, cell: float) -> Path | None:
+def rotation_plot(rows: list[dict[str, Any]], cell: float) -> bytes | None:
     plt = _pyplot()
     if plt is None:
         return None
@@ -28,10 +27,10 @@ def rotation_plot(rows: list[dict[str, Any]], path: Path, cell: float) -> Path |
     ax.set_title(f"Score while rotating the aligned source, {cell:g} m cells")
     ax.legend()
     ax.grid(alpha=0.3)
-    return save_png(fig, path, dpi=110)
+    return png_bytes(fig, dpi=110)
 
 
-def translation_plot(rows: list[dict[str, Any]], path: Path, cell: float) -> Path | None:
+def translation_plot(rows: list[dict[str, Any]], cell: float) -> bytes | None:
     plt = _pyplot()
     if plt is None:
         return None
@@ -48,10 +47,10 @@ def translation_plot(rows: list[dict[str, Any]], path: Path, cell: float) -> Pat
         ax.set_ylabel("shift y (m)")
     fig.colorbar(im, ax=axes[0].tolist(), label="score per source point")
     fig.suptitle(f"Score while shifting the aligned source, {cell:g} m cells")
-    return save_png(fig, path, dpi=110)
+    return png_bytes(fig, dpi=110)
 
 
-def basin_plot(rows: list[dict[str, Any]], rates: list[dict[str, Any]], path: Path) -> Path | None:
+def basin_plot(rows: list[dict[str, Any]], rates: list[dict[str, Any]]) -> bytes | None:
     plt = _pyplot()
     if plt is None:
         return None
@@ -82,10 +81,10 @@ def basin_plot(rows: list[dict[str, Any]], rates: list[dict[str, Any]], path: Pa
     for ax in (a, b):
         ax.grid(alpha=0.3)
         ax.legend(fontsize="small")
-    return save_png(fig, path, dpi=110)
+    return png_bytes(fig, dpi=110)
 
 
-def optimizer_plot(rows: list[dict[str, Any]], path: Path) -> Path | None:
+def optimizer_plot(rows: list[dict[str, Any]]) -> bytes | None:
     plt = _pyplot()
     if plt is None:
         return None
@@ -105,4 +104,4 @@ def optimizer_plot(rows: list[dict[str, Any]], path: Path) -> Path | None:
         ax.grid(alpha=0.3)
     axes[0, 0].legend()
     fig.suptitle("Optimiser traces through their cell schedules")
-    return save_png(fig, path, dpi=110)
+    return png_bytes(fig, dpi=110)

@@ -5,15 +5,13 @@ Needs matplotlib (extra ``[plot]``); without it, one notice is logged and no pic
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from ndt_cli.pipeline.chain import ChainResult
-from ndt_cli.report.figures import pyplot, save_png
+from ndt_cli.report.figures import png_bytes, pyplot
 
 
-def write_topview(out: Path, result: ChainResult) -> Path | None:
+def topview_png(result: ChainResult) -> bytes | None:
     """``topview.png``: slice points of every posed scan (from the pipeline's previews),
-    standpoints, and links (green ok, red not ok)."""
+    standpoints, and links (green ok, red not ok); None without matplotlib."""
     plt = pyplot()
     if plt is None:
         return None
@@ -38,4 +36,4 @@ def write_topview(out: Path, result: ChainResult) -> Path | None:
     ax.set_ylabel("y world (m)")
     ax.set_title("Chained scans (slice points), standpoints and links (green ok, red not ok)")
     ax.legend(markerscale=20, fontsize="small", loc="best")
-    return save_png(fig, out / "topview.png")
+    return png_bytes(fig)

@@ -1,0 +1,202 @@
+"""A run's output folder, replaced as a whole: all of a run's files appear together or not at all.
+
+The files are written into a temporary folder beside the output folder, then the two folders
+are swapped in one atomic step (``renameat2(RENAME_EXCHANGE)`` on Linux; where the file system
+cannot exchange, two renames). Killed at any moment, a run leaves either the old folder or the
+new one, never a mix; a temporary folder left behind by a killed run is removed by the next run
+that writes the same output.
+
+An output folder holds only what ndt-cli writes there: a folder with other files is refused
+before any work starts, so that replacing it can never lose a user's file. Folders of resume
+state (``links/``) are carried over into the new folder.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import errno
+import os
+import re
+import shutil
+import uuid
+from collections.abc import Callable, Iterable, Mapping
+from pathlib import Path
+
+from ndt_cli.errors import OutputError
+
+MANIFEST = ".ndt-cli-outputs"  # names of the files a run wrote, one per line
+STATE = ("links",)  # folders a later run reuses (--resume): carried over, never dropped
+# what ndt-cli versions without a manifest wrote into an output folder
+KNOWN = re.compile(
+    r"^(T_.+\.txt|poses/|links/|result\.json|report\.csv|report\.html|config_used\.yaml"
+    r"|pairs\.csv|poses\.csv|poses\.txt|poses_chain\.txt|summary\.json|topview\.png"
+    r"|e57_header_poses\.txt|eval\.csv|eval\.json"
+    r"|(score_rotation|score_translation|basin|basin_success|optimizers)\.(csv|png))$"
+)
+MARKERS = (  # one of them marks an earlier result
+    "result.json",
+    "summary.json",
+    "links/",
+    "eval.json",
+    "score_rotation.csv",
+    "score_translation.csv",
+    "basin.csv",
+    "optimizers.csv",
+)
+Content = str | bytes | Callable[[Path], None]  # text, bytes, or a writer given the file's path
+
+
+def _entries(folder: Path) -> list[str]:
+    return sorted(e.name + ("/" if e.is_dir() else "") for e in folder.iterdir())
+
+
+def check_output_folder(out: Path) -> Path:
+    """The folder a run may write (symlinks resolved): new, empty, or an earlier result.
+
+    Raises :class:`OutputError` (checked before any work) when ``out`` is a file, the current
+    folder or one of its parents, cannot be written, or holds files ndt-cli did not write.
+    """
+    if str(out) == "":
+        raise OutputError("the output folder name is empty")
+    real = out.resolve()
+    try:
+        exists = real.exists()
+        if exists and not real.is_dir():
+            raise OutputError("the output path exists and is not a folder", out)
+        if real == real.parent or Path.cwd().resolve().is_relative_to(real):
+            raise OutputError("the output must be a folder of its own, not this folder", out)
+        if exists and not (real / MANIFEST).exists():
+            entries = _entries(real)
+            foreign = [e for e in entries if not KNOWN.match(e)]
+            if foreign or (entries and not set(MARKERS) & set(entries)):
+                shown = (foreign or entries)[0]
+                raise OutputError(
+                    f"the folder holds files that ndt-cli did not write ({shown}, ...): "
+                    "choose a new or empty folder",
+                    out,
+                )
+        parent = real.parent  # the new content is staged in a folder beside the output
+        while not parent.exists():
+            parent = parent.parent
+        writable = os.access(parent, os.W_OK | os.X_OK)
+        if not writable or (exists and not os.access(real, os.W_OK | os.X_OK)):
+            raise OutputError("cannot write here (permission denied)", out)
+    except PermissionError as exc:
+        raise OutputError(f"cannot write here ({exc.strerror})", out) from None
+    return real
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def clean_stale(out: Path) -> None:
+    """Remove temporary folders of ``out`` left by runs that were killed."""
+    pattern = re.compile(rf"^\.{re.escape(out.name)}\.(tmp|old)-(\d+)-[0-9a-f]+$")
+    if not out.parent.is_dir():
+        return
+    for entry in out.parent.iterdir():
+        m = pattern.match(entry.name)
+        if m and not _pid_alive(int(m.group(2))):
+            shutil.rmtree(entry, ignore_errors=True)
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap two folders atomically; False when this system or file system cannot."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        renameat2 = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    at_fdcwd, rename_exchange = -100, 2
+    if renameat2(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.EINVAL, errno.ENOSYS, errno.ENOTSUP):
+        return False
+    raise OSError(err, os.strerror(err), str(b))
+
+
+def _carry(old: Path, new: Path, names: Iterable[str]) -> None:
+    """Hard-link (or copy) the entries ``names`` of ``old`` into ``new`` (if not there yet)."""
+    for name in names:
+        src, dst = old / name, new / name
+        if dst.exists() or not (src.exists() or src.is_symlink()):
+            continue
+        if src.is_dir():
+            shutil.copytree(src, dst, copy_function=_link_or_copy)
+        else:
+            _link_or_copy(str(src), str(dst))
+
+
+def _link_or_copy(src: str, dst: str) -> None:
+    try:
+        os.link(src, dst)
+    except OSError:
+        shutil.copy2(src, dst)
+
+
+def _write(folder: Path, files: Mapping[str, Content]) -> None:
+    for name, content in files.items():
+        path = folder / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if callable(content):
+            content(path)
+        else:
+            data = content.encode("utf-8") if isinstance(content, str) else content
+            with open(path, "wb") as fh:
+                fh.write(data)
+                fh.flush()
+                os.fsync(fh.fileno())
+    (folder / MANIFEST).write_text("\n".join(sorted(files)) + "\n", encoding="utf-8")
+
+
+def _sync_folder(folder: Path) -> None:
+    """Make the folder's entries durable before it is swapped in."""
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _swap_in(tmp: Path, real: Path) -> Path:
+    """Put ``tmp`` in place of ``real``; returns where the old content went (or tmp if none)."""
+    if not real.exists():
+        os.rename(tmp, real)
+        return tmp
+    if _exchange(tmp, real):
+        return tmp
+    old = real.parent / f".{real.name}.old-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    os.rename(real, old)
+    os.rename(tmp, real)
+    return old
+
+
+def publish(out: Path, files: Mapping[str, Content], keep_others: bool = False) -> None:
+    """Write ``files`` (name -> content) as the new content of the output folder ``out``, all
+    together. The resume state of the old folder is carried over, and with ``keep_others``
+    every other entry this run does not write too (outputs of other ``ndt-analyze`` commands)."""
+    real = check_output_folder(out)
+    clean_stale(real)
+    tmp = real.parent / f".{real.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    try:
+        tmp.mkdir(parents=True)
+        _write(tmp, files)
+        if real.is_dir():
+            others = [e.name for e in real.iterdir() if e.name not in files and e.name != MANIFEST]
+            _carry(real, tmp, others if keep_others else STATE)
+        _sync_folder(tmp)
+        old = _swap_in(tmp, real)
+    except OSError as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise OutputError(f"cannot write the outputs ({exc.strerror or exc})", out) from None
+    with contextlib.suppress(OSError):
+        shutil.rmtree(old, ignore_errors=True)

@@ -1,0 +1,150 @@
+"""What a person at a terminal and a shell script expect of the commands: versions, help texts,
+completion, config printing and selection, logs without a terminal, tables that are not cut."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from ndt_cli import __version__
+from ndt_cli.cli import analyze_app, chain_app, eval_app, register_app
+from ndt_cli.config import Config, load
+from ndt_cli.config.loading import PRESETS, preset_names
+from ndt_cli.config.printing import commented_yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "sample_data"
+runner = CliRunner()
+APPS = {
+    "ndt-register": register_app,
+    "ndt-chain": chain_app,
+    "ndt-eval": eval_app,
+    "ndt-analyze": analyze_app,
+}
+ENV = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+
+
+@pytest.mark.parametrize("name", sorted(APPS))
+@pytest.mark.parametrize("flag", ["--version", "-V"])
+def test_every_command_tells_its_version(name, flag):
+    res = runner.invoke(APPS[name], [flag], prog_name=name)
+    assert res.exit_code == 0 and res.stdout.strip() == f"{name} {__version__}"
+
+
+@pytest.mark.parametrize("name", sorted(APPS))
+def test_help_shows_flags_as_flags_and_completion(name):
+    res = runner.invoke(APPS[name], ["--help"], prog_name=name)
+    assert res.exit_code == 0
+    assert "<bool>" not in res.stdout and "--no-" not in res.stdout.replace("--no-rotate", "")
+    assert "--install-completion" in res.stdout and "-V, --version" in res.stdout
+
+
+@pytest.mark.parametrize("name", ["ndt-register", "ndt-chain"])
+def test_help_lists_every_exit_code_and_format(name):
+    text = " ".join(runner.invoke(APPS[name], ["--help"], prog_name=name).stdout.split())
+    for code in ("0 success", "1 a result is not trustworthy", "2 bad input", "130 stopped"):
+        assert code in text
+    for word in ("suspect", "degenerate", "not converged", "no overlap", "failed"):
+        assert word in text
+    for fmt in ("PLY", "LAS", "LAZ", "E57", "PCD", "xyz", "csv"):
+        assert re.search(rf"\b{fmt}\b", text), fmt
+
+
+def test_help_shows_the_defaults():
+    text = " ".join(runner.invoke(chain_app, ["--help"]).stdout.split())
+    assert "Parallel processes. [default: (all cores)]" in text
+    assert "[default: ndt_chain]" in text and "[default: local]" in text
+
+
+def test_the_shell_completion_script_is_available():
+    res = runner.invoke(register_app, ["--show-completion", "bash"], prog_name="ndt-register")
+    assert res.exit_code == 0 and "complete" in res.stdout and "ndt" in res.stdout
+
+
+@pytest.mark.parametrize("name", ["ndt-register", "ndt-chain"])
+@pytest.mark.parametrize("config", [None, "paper", "3dtk"])
+def test_print_config_is_commented_yaml_that_loads_back(name, config, tmp_path):
+    args = ["--print-config"] + ([] if config is None else ["--config", config])
+    res = runner.invoke(APPS[name], args, prog_name=name)
+    assert res.exit_code == 0, res.output
+    printed = tmp_path / "printed.yaml"
+    printed.write_text(res.stdout)
+    assert load(printed) == load(config)  # the effective config, whole
+    assert res.stdout.count("\n#") + res.stdout.count("\n  #") > 40  # every key explained
+    assert yaml.safe_load(res.stdout)["grid"]["cell_sizes"] == list(load(config).grid.cell_sizes)
+
+
+def test_the_shipped_default_config_is_the_printed_defaults():
+    assert (PRESETS / "default.yaml").read_text() == commented_yaml(Config())
+    assert {"default", "paper", "lm", "3dtk", "noisy_sensor"} <= set(preset_names())
+    assert (ROOT / "configs" / "paper.yaml").resolve() == (PRESETS / "paper.yaml").resolve()
+
+
+def test_the_surveyor_keys_are_named_and_the_rest_are_internals():
+    text = " ".join(commented_yaml(Config()).replace("# ", "").split())
+    assert "Keys a surveyor sets: input.scale, input.axes" in text
+    assert "slices.heights" in text.split("Every other key")[0]
+    assert "method internal" in text
+
+
+def _log_run(args: list[str], tmp_path: Path) -> tuple[int, list[str], str]:
+    """Run ndt-chain as a script would: stderr into a file, stdout into a pipe."""
+    log = tmp_path / "run.log"
+    code = "from ndt_cli.cli import chain_app; chain_app(prog_name='ndt-chain')"
+    with open(log, "w") as err:
+        run = subprocess.run(
+            [sys.executable, "-c", code, *args],
+            stdout=subprocess.PIPE,
+            stderr=err,
+            text=True,
+            env=ENV,
+            cwd=tmp_path,
+            check=False,
+        )
+    return run.returncode, log.read_text().splitlines(), run.stdout
+
+
+@pytest.mark.slow
+def test_without_a_terminal_every_link_is_a_log_line_and_the_table_is_whole(tmp_path):
+    scans = [str(SAMPLE / f"scan_0{k}.laz") for k in range(3)]
+    code, lines, stdout = _log_run([*scans, "-o", "out", "-j", "1", "-v"], tmp_path)
+    assert code == 0, lines
+    links = [ln for ln in lines if ln.startswith("link ")]
+    pattern = r"link [12]/2 scan_0[01]\.laz <- scan_0[12]\.laz: ok, \d+\.\d s$"
+    assert len(links) == 2 and all(re.match(pattern, ln) for ln in links), lines
+    debug = [ln for ln in lines if ln.startswith("debug:")]
+    assert debug and all("levels" in ln for ln in debug), lines  # ndt-cli's own debug lines
+    foreign = [ln for ln in lines if re.search(r"findfont|numba|matplotlib|distributed", ln)]
+    assert foreign == []
+    assert "scan_00.laz" in stdout and "scan_02.laz" in stdout and "…" not in stdout
+    rows = [ln for ln in stdout.splitlines() if "scan_00.laz" in ln and "scan_01.laz" in ln]
+    assert rows and "22.45920" in rows[0]  # the link's tx, not cut to the terminal's width
+
+
+def test_quiet_means_nothing_but_errors(tmp_path):
+    res = runner.invoke(
+        register_app,
+        [
+            str(SAMPLE / "scan_00.laz"),
+            str(tmp_path / "missing.laz"),
+            "-o",
+            str(tmp_path / "o"),
+            "-q",
+        ],
+    )
+    assert res.exit_code == 2 and res.stdout == ""
+    assert len(res.stderr.strip().splitlines()) == 1
+
+
+def test_usage_errors_are_one_line(tmp_path):
+    for args in (["a.laz", "b.laz", "--jobs", "many"], ["a.laz", "--bogus"], ["--anchor"]):
+        res = runner.invoke(chain_app, args, prog_name="ndt-chain")
+        lines = res.stderr.strip().splitlines()
+        assert res.exit_code == 2 and len(lines) == 1 and lines[0].startswith("ndt-chain: error:")
