@@ -18,6 +18,8 @@ demo: $(STAMP)
 	$(BIN)/python tools/demo_check.py pair ndt_results/pair sample_data/poses_T_world_scan.txt scan_00.laz scan_01.laz
 	OPENBLAS_NUM_THREADS=1 $(BIN)/ndt-chain sample_data/*.laz --out ndt_results/chain --jobs 2
 	$(BIN)/ndt-eval ndt_results/chain --gt sample_data/poses_T_world_scan.txt
+	$(BIN)/ndt-export ndt_results/chain --out ndt_results/street.laz
+	@echo "report: ndt_results/chain/report.html (open it in a browser); cloud: ndt_results/street.laz"
 
 test: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q

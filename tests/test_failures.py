@@ -376,7 +376,7 @@ def test_unreadable_files_and_folders_are_one_line_as_another_user():
             )
             lines = run.stderr.strip().splitlines()
             assert run.returncode == 2 and len(lines) == 1, run.stderr
-            assert ("Permission denied" in lines[0] or "not readable" in lines[0]), lines
+            assert "Permission denied" in lines[0] or "not readable" in lines[0], lines
             assert bad.name in lines[0]
     finally:
         (base / "locked").chmod(0o755)

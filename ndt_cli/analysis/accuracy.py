@@ -25,14 +25,21 @@ DEFAULT_THRESHOLDS = ((2.0, 0.10), (0.1, 0.02))  # (degrees, metres)
 
 @dataclass(frozen=True)
 class Evaluation:
-    """Per-link errors, success rates per threshold and the end-of-chain drift."""
+    """Per-link errors (with the network's verdict on each link, when there is one), success
+    rates per threshold, and the end-of-chain drift of the adjusted and of the chained poses."""
 
     links: list[dict[str, Any]]
     success: list[dict[str, Any]]
     drift: dict[str, Any] | None
+    drift_chained: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return {"links": self.links, "success": self.success, "drift": self.drift}
+        return {
+            "links": self.links,
+            "success": self.success,
+            "drift": self.drift,
+            "drift_chained": self.drift_chained,
+        }
 
 
 def read_reference(
@@ -57,8 +64,15 @@ def read_reference(
     return poses, pairs
 
 
-def _links_of(result_dir: Path) -> tuple[list[tuple[str, str, np.ndarray]], dict[str, np.ndarray]]:
-    """Links (target, source, T) and chained poses of an ndt-chain or ndt-register folder."""
+@dataclass(frozen=True)
+class _Results:
+    links: list[tuple[str, str, np.ndarray, str]]  # target, source, T, network state ('' if none)
+    poses: dict[str, np.ndarray]  # T_world_scan of the adjusted (or chained) ok scans
+    chained: dict[str, np.ndarray]  # T_world_scan along adjacent ok links, not adjusted
+
+
+def _read_results(result_dir: Path) -> _Results:
+    """Links and poses of an ndt-chain or ndt-register folder."""
     pairs_csv = result_dir / "pairs.csv"
     if pairs_csv.exists():
         links = []
@@ -66,18 +80,35 @@ def _links_of(result_dir: Path) -> tuple[list[tuple[str, str, np.ndarray]], dict
             for row in csv.DictReader(fh):
                 f = result_dir / link_file_name(row["target"], row["source"])
                 if f.exists():
-                    links.append((row["target"], row["source"], read_matrix(f)))
-        poses_txt = result_dir / "poses.txt"
-        poses = read_pose_list(poses_txt) if poses_txt.exists() else {}
-        return links, poses
+                    state = row.get("network", "")
+                    links.append((row["target"], row["source"], read_matrix(f), state))
+        return _Results(
+            links, _poses(result_dir / "poses.txt"), _poses(result_dir / "poses_chain.txt")
+        )
     single = result_dir / "T_target_source.txt"
     if single.exists():
         meta = json.loads(read_user_text(result_dir / "result.json", "result"))
         names = [Path(meta["target"]).name, Path(meta["source"]).name]
-        return [(names[0], names[1], read_matrix(single))], {}
+        return _Results([(names[0], names[1], read_matrix(single), "")], {}, {})
     raise InputError(
         "no ndt-chain (pairs.csv) or ndt-register (T_target_source.txt) results", result_dir
     )
+
+
+def _poses(path: Path) -> dict[str, np.ndarray]:
+    return read_pose_list(path) if path.exists() else {}
+
+
+def _drift(est: dict[str, np.ndarray], ref: dict[str, np.ndarray]) -> dict[str, Any] | None:
+    """Error of the last scan in the frame of the first (both named in the reference)."""
+    named = [n for n in est if n in ref]
+    if len(named) < 2:
+        return None
+    first, last = named[0], named[-1]
+    T_ref = np.linalg.inv(ref[first]) @ ref[last]
+    T_est = np.linalg.inv(est[first]) @ est[last]
+    rot, trans = transform_errors(T_est, T_ref)
+    return {"from": first, "to": last, "rotation_error_deg": rot, "translation_error_m": trans}
 
 
 Thresholds = tuple[tuple[float, float], ...]
@@ -87,10 +118,10 @@ def compare_with_reference(
     result_dir: str | Path, reference: str | Path, thresholds: Thresholds = DEFAULT_THRESHOLDS
 ) -> Evaluation:
     """Compare every link (and the chained poses) of ``result_dir`` with ``reference``."""
-    links, est_poses = _links_of(Path(result_dir))
+    results = _read_results(Path(result_dir))
     ref_poses, ref_pairs = read_reference(reference)
     rows = []
-    for target, source, T in links:
+    for target, source, T, state in results.links:
         if (target, source) in ref_pairs:
             T_ref = ref_pairs[(target, source)]
         elif target in ref_poses and source in ref_poses:
@@ -98,14 +129,11 @@ def compare_with_reference(
         else:
             continue
         rot, trans = transform_errors(T, T_ref)
-        rows.append(
-            {
-                "target": target,
-                "source": source,
-                "rotation_error_deg": rot,
-                "translation_error_m": trans,
-            }
-        )
+        row = {"target": target, "source": source, "rotation_error_deg": rot}
+        row["translation_error_m"] = trans
+        if state:
+            row["network"] = state
+        rows.append(row)
     if not rows:
         raise InputError(
             "no link of the results has a reference pose (check the scan names)", reference
@@ -116,13 +144,5 @@ def compare_with_reference(
         success.append(
             {"max_rotation_deg": r, "max_translation_m": t, "success_rate": float(np.mean(ok))}
         )
-    drift = None
-    named = [n for n in est_poses if n in ref_poses]
-    if len(named) >= 2:
-        first, last = named[0], named[-1]
-        world = np.linalg.inv(ref_poses[first])
-        T_ref = world @ ref_poses[last]
-        T_est = np.linalg.inv(est_poses[first]) @ est_poses[last]
-        rot, trans = transform_errors(T_est, T_ref)
-        drift = {"from": first, "to": last, "rotation_error_deg": rot, "translation_error_m": trans}
-    return Evaluation(rows, success, drift)
+    drift, chained = _drift(results.poses, ref_poses), _drift(results.chained, ref_poses)
+    return Evaluation(rows, success, drift, chained if results.chained else None)

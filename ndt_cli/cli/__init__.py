@@ -7,6 +7,7 @@ stopped by Ctrl-C. Heavy modules are imported inside the commands so that ``--he
 from ndt_cli.cli.analyze import analyze_app
 from ndt_cli.cli.chain import chain_app
 from ndt_cli.cli.evaluate import eval_app
+from ndt_cli.cli.export import export_app
 from ndt_cli.cli.register import register_app
 
-__all__ = ["analyze_app", "chain_app", "eval_app", "register_app"]
+__all__ = ["analyze_app", "chain_app", "eval_app", "export_app", "register_app"]

@@ -31,16 +31,20 @@ from ndt_cli.pipeline.workers import ExecutorKind
 
 if TYPE_CHECKING:
     from ndt_cli.config import Config
-    from ndt_cli.pipeline.chain import ChainResult
+    from ndt_cli.pipeline.chain import ChainResult, NetworkOptions
 
 chain_app = new_app()
 
 _HELP = "\n\n".join(
     [
-        "Register a sequence of scans along a street and chain them into one frame.",
+        "Register a campaign of scans as a network of links and adjust it into one frame.",
         "Scans are sorted in natural order of their names (scan_2 before scan_10); each scan is "
-        "registered against the previous readable one. The first scan (or --anchor K) defines "
-        "the world frame; poses.txt holds T_world_scan of every scan.",
+        "registered to its --neighbours predecessors, to the pairs of --pairs, and to the scans "
+        "a first adjustment puts within --loop-radius (loop closures). The network is adjusted "
+        "globally: a link that disagrees with the others is rejected, and every scan gets a "
+        "status (ok, suspect, unposed) and a pose with its uncertainty. The first scan (or "
+        "--anchor K) defines the world frame; poses.txt holds T_world_scan of the ok scans. "
+        "--neighbours 1 --no-adjust is the classic chain.",
         FORMATS,
         EXIT_CODES,
         "Examples:\n\n"
@@ -76,6 +80,27 @@ def chain(
             help="Dask scheduler address, tcp://HOST:PORT.", show_default="a LocalCluster"
         ),
     ] = None,
+    neighbours: Annotated[
+        int, typer.Option("--neighbours", "-k", help="Predecessors each scan is registered to.")
+    ] = 2,
+    adjust: Annotated[
+        bool,
+        typer.Option(
+            "--adjust/--no-adjust",
+            help="Adjust the network globally, verify every link by the others, close loops.",
+        ),
+    ] = True,
+    loop_radius: Annotated[
+        float | None,
+        typer.Option(
+            help="Register scans the network puts this close (m) as loop closures; 0: none.",
+            show_default="2 x the median adjacent link",
+        ),
+    ] = None,
+    pairs: Annotated[
+        Path | None,
+        typer.Option(help="CSV of target,source rows: more pairs to register (scan names)."),
+    ] = None,
     print_config: PrintConfigOpt = False,
     json_out: JsonOpt = False,
     quiet: QuietOpt = False,
@@ -88,8 +113,9 @@ def chain(
     with user_errors("ndt-chain", debug, _RESUME_HINT):
         cfg = load_config(config, print_config)
         paths = _scans(scans or [], opts)
+        net = _network(paths, neighbours, adjust, loop_radius, pairs)
         check_out(out)
-        result, runtime = _run(paths, cfg, opts)
+        result, runtime = _run(paths, cfg, opts, net)
     _show(result, runtime, out, json_out, quiet)
     if not result.ok:
         raise typer.Exit(EXIT_REGISTRATION)
@@ -126,7 +152,26 @@ def _scans(scans: list[Path], opts: _Options) -> list[Path]:
     return paths
 
 
-def _run(paths: list[Path], cfg: Config, opts: _Options) -> tuple[ChainResult, float]:
+def _network(
+    paths: list[Path], neighbours: int, adjust: bool, radius: float | None, pairs: Path | None
+) -> NetworkOptions:
+    """The network's options, checked."""
+    from ndt_cli.errors import ConfigError
+    from ndt_cli.pipeline.chain import NetworkOptions
+    from ndt_cli.pipeline.network import read_pairs
+    from ndt_cli.pipeline.scans import scan_names
+
+    if not 1 <= neighbours <= 10:
+        raise ConfigError(f"--neighbours must be between 1 and 10, got {neighbours}")
+    if radius is not None and not 0 <= radius <= 1e4:
+        raise ConfigError(f"--loop-radius must be between 0 and 10000 m, got {radius}")
+    user = tuple(read_pairs(pairs, scan_names(paths))) if pairs is not None else ()
+    return NetworkOptions(neighbours, adjust, radius, user)
+
+
+def _run(
+    paths: list[Path], cfg: Config, opts: _Options, net: NetworkOptions
+) -> tuple[ChainResult, float]:
     """Run the chain with a progress display and publish its outputs; (result, seconds)."""
     import time
 
@@ -139,7 +184,8 @@ def _run(paths: list[Path], cfg: Config, opts: _Options) -> tuple[ChainResult, f
     t0 = time.perf_counter()
     pool = make_executor(opts.executor, opts.jobs, opts.scheduler)
     names = tuple(scan_names(paths))
-    with ChainProgress(names, len(paths) - 1, enabled=opts.progress) as advance:
+    total = len(paths) * net.neighbours - net.neighbours * (net.neighbours + 1) // 2
+    with ChainProgress(names, max(total, 1) + len(net.pairs), enabled=opts.progress) as advance:
         result = run_chain(
             paths,
             cfg,
@@ -147,6 +193,7 @@ def _run(paths: list[Path], cfg: Config, opts: _Options) -> tuple[ChainResult, f
             executor=pool,
             resume=opts.resume,
             anchor=opts.anchor,
+            network=net,
             on_progress=advance,
         )
     runtime = time.perf_counter() - t0

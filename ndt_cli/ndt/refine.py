@@ -8,7 +8,7 @@ weighted by Huber's function; the correspondence distance shrinks from ``max_dis
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -27,7 +27,8 @@ class IcpResult:
     distances (m), inlier count, iterations, the 6x6 normal matrix ``hessian`` of the weighted
     point-to-plane residuals at the solution (rotation vector rad about the centroid of the
     matched points, then translation m; axes of the inputs), and ``overlap``: the share of the
-    (thinned) source points with a target point within ``overlap_distance`` after alignment."""
+    (thinned) source points with a target point within ``overlap_distance`` after alignment;
+    ``centroid``: the point the rotation of ``hessian`` is about (inputs' frame, m)."""
 
     T: np.ndarray
     rms: float
@@ -35,6 +36,7 @@ class IcpResult:
     iterations: int
     hessian: np.ndarray
     overlap: float
+    centroid: np.ndarray = field(default_factory=lambda: np.zeros(3))  # of the matched points
 
     @property
     def hessian_eigenvalues(self) -> np.ndarray:
@@ -109,13 +111,14 @@ def icp(
         dist = max(min_distance, 0.7 * dist)
         if np.linalg.norm(x[:3]) < 1e-6 and np.linalg.norm(x[3:]) < 1e-5 and dist == min_distance:
             break
+    centroid = pi.mean(axis=0) if len(pi) else np.zeros(3)
     if len(pi):  # the curvature about the matched points' centroid: independent of the frame
-        J = np.column_stack([np.cross(pi - pi.mean(axis=0), ni), ni])
+        J = np.column_stack([np.cross(pi - centroid, ni), ni])
         H = (J * w[:, None]).T @ J
     d, _ = tree.query(
         src @ T[:3, :3].T + T[:3, 3], distance_upper_bound=overlap_distance, workers=-1
     )
-    return IcpResult(T, rms, inliers, it, H, float(np.isfinite(d).mean()))
+    return IcpResult(T, rms, inliers, it, H, float(np.isfinite(d).mean()), centroid)
 
 
 @dataclass(frozen=True)

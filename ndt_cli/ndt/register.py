@@ -42,17 +42,24 @@ def _starts(
     sampler: SourceSampler,
     cfg: Config,
     init: np.ndarray | None,
+    guess: np.ndarray | None,
     kernels: Kernels,
 ) -> tuple[np.ndarray, list[LevelStats], tuple[float, ...]]:
-    """Candidate poses (reduced frames), the search's level record and the refinement schedule."""
+    """Candidate poses (reduced frames), the search's level record and the refinement schedule.
+
+    ``init`` replaces the search: it is the only candidate. ``guess`` is one more candidate
+    beside the search's: it wins only if it fits better, so a wrong guess cannot be accepted
+    where the search alone would not accept it."""
     cells = cfg.grid.cell_sizes
     if init is not None:
-        T_local = target.to_local() @ np.asarray(init, float) @ source.from_local()
-        return np.array([[T_local[0, 3], T_local[1, 3], yaw_of(T_local)]]), [], cells
+        return _planar(target, source, np.asarray(init, float))[None], [], cells
     found = start_search(
         target, source, maps, sampler, cells[0], cfg.search, cfg.optimizer, kernels
     )
-    return found.candidates, [found.level], cells[1:] if len(cells) > 1 else cells
+    candidates = found.candidates
+    if guess is not None:
+        candidates = np.vstack([candidates, _planar(target, source, np.asarray(guess, float))])
+    return candidates, [found.level], cells[1:] if len(cells) > 1 else cells
 
 
 def _planar(target: PreparedScan, source: PreparedScan, T: np.ndarray) -> np.ndarray:
@@ -98,12 +105,15 @@ def register_prepared(
     cfg: Config,
     init: np.ndarray | None = None,
     kernels: Kernels = NUMBA,
+    guess: np.ndarray | None = None,
 ) -> RegistrationResult:
-    """Register prepared scans; ``init`` is an optional 4x4 guess of T_target_source."""
+    """Register prepared scans. ``init``: a 4x4 T_target_source to start from instead of the
+    search; ``guess``: a 4x4 T_target_source added to the search's candidates (a loop closure's
+    pose from the network), never trusted more than the search."""
     t_start = time.perf_counter()
     maps = TargetMaps(target.slices, cfg.grid)
     sampler = SourceSampler(source.slices, cfg.source)
-    candidates, levels, schedule = _starts(target, source, maps, sampler, cfg, init, kernels)
+    candidates, levels, schedule = _starts(target, source, maps, sampler, cfg, init, guess, kernels)
     schedule = with_verification(schedule)
     refined = coarse_to_fine(
         candidates, schedule, maps, sampler, cfg.optimizer, cfg.search.refine_offsets, kernels
@@ -162,6 +172,11 @@ def _result(
         overlap_3d=float("nan") if icp is None else icp.overlap,
         weak_direction=s.verdict.weak_direction,
         timings=timings,
+        reduction_target=target.reduction,
+        reduction_source=source.reduction,
+        level_target=target.level,
+        level_source=source.level,
+        icp_centroid=None if icp is None else icp.centroid,
     )
 
 

@@ -102,6 +102,14 @@ class RegistrationResult:
     overlap_3d: float = float("nan")
     weak_direction: np.ndarray | None = None
     timings: dict[str, float] = field(default_factory=dict)  # s: grid_s, ndt_s, refine_s
+    # the frames the link's uncertainty refers to: each scan's reduction point (scan frame, m)
+    # and levelling rotation (scan axes -> levelled axes); the ICP matches' centroid (target's
+    # reduced frame, m; None without ICP)
+    reduction_target: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    reduction_source: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    level_target: np.ndarray = field(default_factory=lambda: np.eye(3))
+    level_source: np.ndarray = field(default_factory=lambda: np.eye(3))
+    icp_centroid: np.ndarray | None = None
 
     def __repr__(self) -> str:
         rot = f"yaw {self.yaw_deg:.4f} deg"
@@ -120,6 +128,14 @@ class RegistrationResult:
     def degenerate(self) -> str:
         """Text of :attr:`weak_direction` ('' when there is none)."""
         return describe_direction(self.weak_direction)
+
+    @property
+    def T_reduced(self) -> np.ndarray:
+        """``T_target_source`` between the scans' reduced frames (each scan minus its
+        reduction point): small numbers whatever the georeference."""
+        A, B = np.eye(4), np.eye(4)
+        A[:3, 3], B[:3, 3] = -self.reduction_target, self.reduction_source
+        return A @ self.T_target_source @ B
 
     @property
     def iterations(self) -> int:
@@ -185,6 +201,11 @@ class RegistrationResult:
             "icp_hessian_eigenvalues": self.icp_hessian_eigenvalues.tolist(),
             "timings": dict(self.timings),
             "weak_direction": _list(self.weak_direction),
+            "reduction_target": _list(self.reduction_target),
+            "reduction_source": _list(self.reduction_source),
+            "level_target": _list(self.level_target),
+            "level_source": _list(self.level_source),
+            "icp_centroid": _list(self.icp_centroid),
         }
 
     @classmethod
@@ -203,6 +224,11 @@ class RegistrationResult:
             icp_hessian=_array(d.get("icp_hessian")),
             weak_direction=_array(d.get("weak_direction")),
             timings=dict(d.get("timings", {})),
+            reduction_target=np.array(d["reduction_target"], dtype=float),
+            reduction_source=np.array(d["reduction_source"], dtype=float),
+            level_target=np.array(d["level_target"], dtype=float),
+            level_source=np.array(d["level_source"], dtype=float),
+            icp_centroid=_array(d.get("icp_centroid")),
         )
         return cls(**kw)
 

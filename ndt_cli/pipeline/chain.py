@@ -1,10 +1,16 @@
-"""Register a sequence of scans pair by pair and chain the links into one frame.
+"""Register a campaign of scans as a network of links and give every scan a pose and a status.
 
-Scan i is registered against scan i-1 (the last readable scan before it). The first scan, or
-``anchor``, defines the world frame: ``T_world_scan`` of every other scan is the product of the
-links between them. Links are independent and run in parallel on an executor; each finished link
-is written at once (see :class:`~ndt_cli.pipeline.links.LinkStore`), so an interrupted chain
-resumes where it stopped and gives the same outputs.
+1. **Plan**: each scan against its ``neighbours`` predecessors, plus the user's pairs
+   (:mod:`ndt_cli.pipeline.network`).
+2. **Prepare** every scan a link needs, once, in parallel; a scan that cannot be read fails its
+   links and the plan goes around it.
+3. **Register** the links in parallel on an executor; each finished link is saved at once, so
+   an interrupted run resumes where it stopped (``resume``).
+4. **Close loops** (with the adjustment): scans that a first solution puts within the loop
+   radius but that no link joins are registered too, with the network's pose as one more
+   candidate of the search.
+5. **Solve** (:mod:`ndt_cli.pipeline.solution`): the adjusted (or chained) ``T_world_scan``
+   and status of every scan; the world is the ``anchor`` scan's frame.
 """
 
 from __future__ import annotations
@@ -12,7 +18,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 
@@ -25,107 +31,113 @@ from ndt_cli.ndt.prepare import PreparedScan
 from ndt_cli.pipeline.executors import Executor
 from ndt_cli.pipeline.links import Link, LinkStore, link_key
 from ndt_cli.pipeline.local_pool import WorkerPool
+from ndt_cli.pipeline.network import (
+    LOOP_RADIUS_FACTOR,
+    PlannedLink,
+    median_adjacent_length,
+    merge,
+    plan_loops,
+    plan_sequence,
+)
 from ndt_cli.pipeline.scans import file_hash, scan_names
+from ndt_cli.pipeline.solution import NetworkSolution, solve
 from ndt_cli.pipeline.tasks import LinkJob, prepare_scan, register_link, register_paths
+from ndt_cli.pipeline.verify import NodeStatus
 from ndt_cli.pipeline.workers import default_jobs
 
 log = logging.getLogger(__name__)
+progress = logging.getLogger("ndt_cli.progress")
+
+
+@dataclass(frozen=True)
+class NetworkOptions:
+    """Which links the network holds and how it is solved: ``neighbours`` predecessors per
+    scan, the ``adjust``-ment (and loop closures within ``loop_radius`` m, None: twice the
+    median adjacent link, 0: none), the user's ``pairs``."""
+
+    neighbours: int = 2
+    adjust: bool = True
+    loop_radius: float | None = None
+    pairs: tuple[PlannedLink, ...] = ()
 
 
 @dataclass(frozen=True)
 class ChainResult:
-    """All links, and ``T_world_scan`` per scan (None when a failed link cuts it off)."""
+    """The links of a campaign and what the network made of them."""
 
     scans: tuple[Path, ...]
     names: tuple[str, ...]  # unique scan names, as the outputs show them
     links: tuple[Link, ...]
-    poses: tuple[np.ndarray | None, ...]
+    solution: NetworkSolution
     anchor: int
     unreadable: dict[int, str]
     previews: dict[int, np.ndarray]  # thinned slice points (x, y, z) per scan, scan frame
     reused: tuple[int, ...] = ()  # links taken from an earlier run (--resume)
+    loop_radius: float = float("nan")  # m, the radius loop closures were searched within
+
+    @property
+    def poses(self) -> tuple[np.ndarray | None, ...]:
+        """``T_world_scan`` of every scan (None when unposed; suspect scans have one too)."""
+        return self.solution.poses
 
     @property
     def ok(self) -> bool:
-        return not self.unreadable and all(link.ok for link in self.links)
+        """Every scan has a trustworthy pose."""
+        return all(s.status is NodeStatus.OK for s in self.solution.scans)
 
 
 def plan_links(n_scans: int, unreadable: set[int]) -> list[tuple[int, int]]:
-    """(target, source) per scan after the first: the last readable scan before it as target.
-
-    Link ``k`` has source scan ``k + 1``; a link whose source cannot be read fails, and the next
-    scan is registered against the last readable one instead.
-    """
-    pairs = []
-    last = 0
-    for j in range(1, n_scans):
-        pairs.append((last, j))
-        if j not in unreadable or last in unreadable:
-            last = j
-    return pairs
-
-
-def compose_poses(n_scans: int, links: Sequence[Link], anchor: int) -> list[np.ndarray | None]:
-    """``T_world_scan`` per scan from the links (world = the anchor scan's frame).
-
-    Only ok links carry a pose: a link that failed or is not ok (suspect, degenerate, ...)
-    leaves its source without one, and so are the scans registered against a scan without one.
-    """
-    poses: list[np.ndarray | None] = [None] * n_scans
-    poses[anchor] = np.eye(4)
-    with_T = [link for link in links if link.ok]
-    for link in sorted(with_T, key=lambda k: k.source):  # forward: T_w_j = T_w_i @ T_i_j
-        if link.source > anchor and poses[link.target] is not None:
-            poses[link.source] = poses[link.target] @ link.T_target_source
-    for link in sorted(with_T, key=lambda k: -k.source):  # backward: T_w_i = T_w_j @ inv(T_i_j)
-        if link.source <= anchor and poses[link.source] is not None:
-            poses[link.target] = poses[link.source] @ np.linalg.inv(link.T_target_source)
-    return poses
+    """(target, source) pairs of the classic chain: each scan against the last readable scan
+    before it (one neighbour)."""
+    return [(k.target, k.source) for k in plan_sequence(n_scans, 1, unreadable)]
 
 
 class _ChainRun:
-    """The state of one chain run: what is planned, finished, prepared and unreadable."""
+    """The state of one run: what is planned, finished, prepared and unreadable."""
 
     def __init__(
-        self,
-        paths: list[Path],
-        cfg: Config,
-        out: Path,
-        executor: Executor,
-        on_progress: Callable[[Link], None] | None,
+        self, paths: list[Path], cfg: Config, out: Path, executor: Executor, report: Callable
     ) -> None:
         self.paths, self.cfg, self.executor = paths, cfg, executor
         self.store = LinkStore(out)
         self.cfg_text = dump(cfg)
         self.hashes = [file_hash(p) for p in paths]
-        self.on_progress = on_progress
+        self.on_progress = report
         self.unreadable: dict[int, str] = {}
-        self.finished: dict[int, Link] = {}
+        self.finished: dict[tuple[int, int], Link] = {}
         self.prepared: dict[int, PreparedScan] = {}
         self.previews: dict[int, np.ndarray] = {}
-        self.reused: set[int] = set()
+        self.reused: set[tuple[int, int]] = set()
+        self.order: list[tuple[int, int]] = []  # pairs in the order the links were planned
 
-    def plan(self) -> list[LinkJob]:
-        """One job per link of the plan around the scans known to be unreadable."""
-        pairs = plan_links(len(self.paths), set(self.unreadable))
-        return [
-            LinkJob(k, i, j, link_key(self.hashes[i], self.hashes[j], self.cfg_text))
-            for k, (i, j) in enumerate(pairs)
-        ]
+    def jobs(self, planned: Sequence[PlannedLink], guesses: dict | None = None) -> list[LinkJob]:
+        """One job per planned link, keyed by its inputs (and a loop closure's guess)."""
+        out = []
+        for k in planned:
+            guess = (guesses or {}).get((k.target, k.source))
+            extra = "" if guess is None else " ".join(f"{v:.6f}" for v in guess.ravel())
+            key = link_key(self.hashes[k.target], self.hashes[k.source], self.cfg_text + extra)
+            index = len(self.order) + len(out)
+            out.append(LinkJob(index, k.target, k.source, key, k.kind, guess))
+        return out
 
     def reuse(self, jobs: list[LinkJob]) -> None:
         """Take the links an earlier run finished with the same inputs (``--resume``)."""
         for job in jobs:
-            link = self.store.load(job.index, job.key)
-            if link is not None and (link.target, link.source) == (job.target, job.source):
-                self.finished[job.index] = link
+            link = self.store.load(job.target, job.source, job.key)
+            if link is not None:
+                self.finished[(job.target, job.source)] = job.adopt(link)
+                self.reused.add((job.target, job.source))
 
     def prepare(self, jobs: list[LinkJob]) -> None:
         """Read and slice, once and in parallel, each scan that an unfinished link needs."""
-        todo = [j for j in jobs if j.index not in self.finished]
-        needed = sorted({s for j in todo for s in (j.target, j.source)})
+        todo = [j for j in jobs if (j.target, j.source) not in self.finished]
+        needed = {s for j in todo for s in (j.target, j.source)}
+        needed = sorted(needed - set(self.prepared) - set(self.unreadable) - set(self._previewed()))
         task = prepare_scan if self.executor.ships_data else _preview_or_problem
         tasks = {i: partial(task, self.paths[i], self.cfg) for i in needed}
+        if tasks:
+            progress.info("preparing %d scan(s)", len(tasks))
         for i, value in self.executor.run(tasks):
             if isinstance(value, str):
                 self.unreadable[i] = value
@@ -135,27 +147,32 @@ class _ChainRun:
             self.previews[i] = value
             self.store.save_preview(self._scan_key(i), value)
 
+    def _previewed(self) -> list[int]:
+        return [] if self.executor.ships_data else list(self.previews)
+
     def _scan_key(self, i: int) -> str:
         return link_key(self.hashes[i], "", self.cfg_text)
 
     def register(self, jobs: list[LinkJob]) -> None:
         """Register every link not finished yet; each is saved as soon as it is done."""
-        self.finished = {k: v for k, v in self.finished.items() if v.key == jobs[k].key}
-        self.reused = set(self.finished)
-        for link in list(self.finished.values()):
-            self._report(link)
+        self.order += [(j.target, j.source) for j in jobs]
+        for job in jobs:
+            if (job.target, job.source) in self.reused:
+                self._report(self.finished[(job.target, job.source)])
         tasks = {}
         for job in jobs:
-            if job.index in self.finished:
+            if (job.target, job.source) in self.finished:
                 continue
             bad = self.unreadable.get(job.source) or self.unreadable.get(job.target)
             if bad:
                 self._report(job.failed(bad))
             else:
                 tasks[job.index] = self._task(job)
+        if tasks:
+            progress.info("registering %d link(s)", len(tasks))
         by_index = {job.index: job for job in jobs}
         for index, link in self.executor.run(tasks):
-            if isinstance(link, str):  # the worker died or raised: this link fails, not the chain
+            if isinstance(link, str):  # the worker died or raised: this link fails, not the run
                 self._report(by_index[index].failed(link))
                 continue
             self.store.save(link)
@@ -168,29 +185,13 @@ class _ChainRun:
         return partial(register_paths, job, self.paths[i], self.paths[j], self.cfg)
 
     def _report(self, link: Link) -> None:
-        self.finished[link.index] = link
+        self.finished[(link.target, link.source)] = link
         if self.on_progress:
             self.on_progress(link)
 
-    def result(self, anchor: int) -> ChainResult:
-        links = tuple(self.finished[k] for k in sorted(self.finished))
-        for i in range(len(self.paths)):
-            if i not in self.previews and i not in self.unreadable:
-                preview = self.store.load_preview(self._scan_key(i))
-                if preview is not None:
-                    self.previews[i] = preview
-        for reason in dict(sorted(self.unreadable.items())).values():
-            log.warning("%s", reason)
-        return ChainResult(
-            scans=tuple(self.paths),
-            names=tuple(scan_names(self.paths)),
-            links=links,
-            poses=tuple(compose_poses(len(self.paths), links, anchor)),
-            anchor=anchor,
-            unreadable=dict(sorted(self.unreadable.items())),
-            previews=dict(sorted(self.previews.items())),
-            reused=tuple(sorted(self.reused)),
-        )
+    def links(self) -> list[Link]:
+        """The finished links in planning order, indexed 0, 1, ..."""
+        return [replace(self.finished[p], index=k) for k, p in enumerate(self.order)]
 
 
 def _preview_or_problem(path: Path, cfg: Config) -> np.ndarray | str:
@@ -214,6 +215,22 @@ def _stopping(run: _ChainRun) -> Iterator[None]:
         run.executor.close()
 
 
+@dataclass
+class _Step:
+    """One round of links: plan, reuse, prepare, register."""
+
+    run: _ChainRun
+    resume: bool
+    planned: list[PlannedLink] = field(default_factory=list)
+
+    def __call__(self, planned: Sequence[PlannedLink], guesses: dict | None = None) -> None:
+        jobs = self.run.jobs(planned, guesses)
+        if self.resume:
+            self.run.reuse(jobs)
+        self.run.prepare(jobs)
+        self.planned += list(planned)
+
+
 def run_chain(
     scans: Sequence[str | Path],
     cfg: Config,
@@ -223,20 +240,86 @@ def run_chain(
     jobs: int | None = None,
     resume: bool = False,
     anchor: int = 0,
+    network: NetworkOptions | None = None,
     on_progress: Callable[[Link], None] | None = None,
 ) -> ChainResult:
-    """Register the scans in the order given, write each link as it finishes, compose poses.
+    """Register the scans as a network (see the module docstring) and solve it.
 
     ``executor``: where tasks run (default: ``jobs`` local worker processes); results do not
-    depend on it. The executor is closed when the chain ends.
+    depend on it. The executor is closed when the run ends.
     """
+    net = network or NetworkOptions()
     executor = executor or WorkerPool(default_jobs(jobs))
-    run = _ChainRun([Path(p) for p in scans], cfg, Path(out), executor, on_progress)
+    paths = [Path(p) for p in scans]
+    run = _ChainRun(paths, cfg, Path(out), executor, on_progress)
     run.store.clean_stale()
+    step = _Step(run, resume)
     with _stopping(run):
-        jobs_planned = run.plan()
-        if resume:
-            run.reuse(jobs_planned)
-        run.prepare(jobs_planned)
-        run.register(run.plan())  # re-planned around the scans that could not be read
-    return run.result(anchor)
+        _first_round(run, step, net)
+        radius = _close_loops(run, step, net, anchor)
+    return _result(run, anchor, net, radius)
+
+
+def _first_round(run: _ChainRun, step: _Step, net: NetworkOptions) -> None:
+    """Plan, prepare and register the sequence and user links (re-planned around the scans
+    that cannot be read)."""
+    n = len(run.paths)
+    step(merge([*plan_sequence(n, net.neighbours), *net.pairs]))
+    planned = merge([*plan_sequence(n, net.neighbours, run.unreadable), *net.pairs])
+    new = [k for k in planned if k not in step.planned]
+    if new:
+        step(new)
+    run.register(run.jobs(planned))
+
+
+def _close_loops(run: _ChainRun, step: _Step, net: NetworkOptions, anchor: int) -> float:
+    """With the adjustment: a first solution, then the loop closures it suggests. Returns the
+    loop radius used (m; NaN when there was none)."""
+    if not net.adjust or net.loop_radius == 0:
+        return float("nan")
+    links = run.links()
+    first = solve(len(run.paths), anchor, links, True, run.unreadable)
+    radius = net.loop_radius
+    if radius is None:
+        radius = LOOP_RADIUS_FACTOR * median_adjacent_length(step.planned, first.poses)
+    if not np.isfinite(radius):
+        return float("nan")
+    ok = [s.T_world_scan if s.status is NodeStatus.OK else None for s in first.scans]
+    loops = plan_loops(ok, step.planned, radius)
+    if loops:
+        guesses = {(k.target, k.source): _guess(first, k) for k in loops}
+        step(loops, guesses)
+        run.register(run.jobs(loops, guesses))
+    return float(radius)
+
+
+def _guess(solution: NetworkSolution, k: PlannedLink) -> np.ndarray:
+    """T_target_source that the network gives a loop candidate (scan frames)."""
+    T_t, T_s = solution.poses[k.target], solution.poses[k.source]
+    return np.linalg.inv(T_t) @ T_s
+
+
+def _result(run: _ChainRun, anchor: int, net: NetworkOptions, radius: float) -> ChainResult:
+    links = tuple(run.links())
+    for reason in dict(sorted(run.unreadable.items())).values():
+        log.warning("%s", reason)
+    if net.adjust:
+        progress.info("adjusting the network of %d link(s)", len(links))
+    solution = solve(len(run.paths), anchor, links, net.adjust, run.unreadable)
+    for i in range(len(run.paths)):
+        if i not in run.previews and i not in run.unreadable:
+            preview = run.store.load_preview(run._scan_key(i))
+            if preview is not None:
+                run.previews[i] = preview
+    reused = tuple(k for k, link in enumerate(links) if (link.target, link.source) in run.reused)
+    return ChainResult(
+        scans=tuple(run.paths),
+        names=tuple(scan_names(run.paths)),
+        links=links,
+        solution=solution,
+        anchor=anchor,
+        unreadable=dict(sorted(run.unreadable.items())),
+        previews=dict(sorted(run.previews.items())),
+        reused=reused,
+        loop_radius=radius,
+    )

@@ -1,7 +1,8 @@
 """Links of a chain: one registration of a scan pair, its identity, and its record on disk.
 
-Every finished link is written at once to ``links/NNNN.json`` (atomically) with the key of its
-inputs (both files' hashes and the config), so an interrupted chain resumes where it stopped.
+Every finished link is written at once to ``links/TTTT-SSSS.json`` (target and source scan
+indices; atomically) with the key of its inputs (both files' hashes, the config, and a loop
+closure's guess), so an interrupted chain resumes where it stopped.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import numpy as np
 from ndt_cli.io import atomic
 from ndt_cli.io.serialize import to_json
 from ndt_cli.ndt.result import RegistrationResult, Status
+from ndt_cli.pipeline.network import LinkKind
 
 LINK_FOLDER = "links"
 _FORMAT = 2  # version of the link files: older ones are recomputed, not misread
@@ -40,6 +42,7 @@ class Link:
     key: str = ""
     result: RegistrationResult | None = None
     failure: str = ""
+    kind: LinkKind = LinkKind.ADJACENT
 
     @property
     def status(self) -> Status:
@@ -72,6 +75,7 @@ class Link:
             "source": self.source,
             "key": self.key,
             "failure": self.failure,
+            "kind": self.kind.value,
             "result": result,
         }
 
@@ -85,6 +89,7 @@ class Link:
             str(d["key"]),
             None if result is None else RegistrationResult.from_dict(result),
             str(d.get("failure", "")),
+            LinkKind(d.get("kind", LinkKind.ADJACENT.value)),
         )
 
 
@@ -94,8 +99,8 @@ class LinkStore:
     def __init__(self, out: Path) -> None:
         self.folder = Path(out) / LINK_FOLDER
 
-    def path(self, index: int) -> Path:
-        return self.folder / f"{index:04d}.json"
+    def path(self, target: int, source: int) -> Path:
+        return self.folder / f"{target:04d}-{source:04d}.json"
 
     def clean_stale(self) -> None:
         """Remove temporary files left by a run that was killed while writing a link."""
@@ -103,7 +108,7 @@ class LinkStore:
             stale.unlink(missing_ok=True)
 
     def save(self, link: Link) -> None:
-        atomic.write_text(self.path(link.index), to_json(link.to_dict()))
+        atomic.write_text(self.path(link.target, link.source), to_json(link.to_dict()))
 
     def save_preview(self, scan_key: str, points: np.ndarray) -> None:
         """Keep a scan's preview points (for the top view of a resumed chain)."""
@@ -116,10 +121,11 @@ class LinkStore:
         except (OSError, ValueError):
             return None
 
-    def load(self, index: int, key: str) -> Link | None:
-        """The finished link ``index`` if its inputs had this ``key``, else None."""
+    def load(self, target: int, source: int, key: str) -> Link | None:
+        """The finished link of this pair if its inputs had this ``key``, else None."""
         try:
-            link = Link.from_dict(json.loads(self.path(index).read_text(encoding="utf-8")))
+            text = self.path(target, source).read_text(encoding="utf-8")
+            link = Link.from_dict(json.loads(text))
         except (OSError, ValueError, TypeError, KeyError):
             return None
         return link if link.key == key else None

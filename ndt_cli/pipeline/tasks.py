@@ -6,27 +6,37 @@ reason (a ``str``), a link that cannot be registered a failed :class:`Link`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+
+import numpy as np
 
 from ndt_cli.config.schema import Config
 from ndt_cli.errors import NdtError
 from ndt_cli.ndt.prepare import PreparedScan, load_and_prepare
 from ndt_cli.ndt.register import register_prepared
 from ndt_cli.pipeline.links import Link
+from ndt_cli.pipeline.network import LinkKind
 
 
 @dataclass(frozen=True)
 class LinkJob:
-    """Which link to register: its index, the target and source scans (indices), its key."""
+    """Which link to register: its index, the target and source scans (indices), its key, its
+    kind, and a loop closure's guess of T_target_source (scan frames; None for the others)."""
 
     index: int
     target: int
     source: int
     key: str
+    kind: LinkKind = LinkKind.ADJACENT
+    guess: np.ndarray | None = None
 
     def failed(self, reason: str) -> Link:
-        return Link(self.index, self.target, self.source, self.key, failure=reason)
+        return Link(self.index, self.target, self.source, self.key, failure=reason, kind=self.kind)
+
+    def adopt(self, link: Link) -> Link:
+        """A finished link (e.g. of an earlier run) as this job's."""
+        return replace(link, index=self.index, kind=self.kind)
 
 
 def prepare_scan(path: Path, cfg: Config) -> PreparedScan | str:
@@ -47,10 +57,10 @@ def scan_problem(path: Path, cfg: Config) -> str | None:
 def register_link(job: LinkJob, target: PreparedScan, source: PreparedScan, cfg: Config) -> Link:
     """Register prepared scan ``source`` onto ``target``."""
     try:
-        result = register_prepared(target, source, cfg)
+        result = register_prepared(target, source, cfg, guess=job.guess)
     except NdtError as exc:
         return job.failed(str(exc))
-    return Link(job.index, job.target, job.source, job.key, result)
+    return Link(job.index, job.target, job.source, job.key, result, kind=job.kind)
 
 
 def register_paths(job: LinkJob, target: Path, source: Path, cfg: Config) -> Link:

@@ -7,6 +7,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from ndt_cli.config.loading import dump
 from ndt_cli.config.schema import Config
 from ndt_cli.io.matrices import format_matrix, format_pose_line
@@ -14,17 +16,21 @@ from ndt_cli.io.outdir import publish
 from ndt_cli.io.serialize import csv_text, to_json
 from ndt_cli.ndt.result import Status
 from ndt_cli.pipeline.chain import ChainResult
-from ndt_cli.pipeline.scans import link_file_name
+from ndt_cli.pipeline.scans import file_stem, link_file_name
+from ndt_cli.report.html_report import chain_report
 from ndt_cli.report.tables import PAIR_COLUMNS, POSE_COLUMNS, pair_row, pose_row
 from ndt_cli.report.topview import topview_png
 
 
 def summary(result: ChainResult, runtime_s: float) -> dict[str, Any]:
-    """The run in numbers: links per status, unreadable scans, scans without a pose."""
+    """The run in numbers: links per status and per network state, scans per status."""
     statuses = [link.status for link in result.links]
     good = (Status.OK, Status.SUSPECT, Status.DEGENERATE)
+    sol = result.solution
+    scans = [s.status for s in sol.scans]
     return {
         "scans": [str(p) for p in result.scans],
+        "scan_files": [str(p.resolve()) for p in result.scans],
         "anchor": result.anchor,
         "links": len(result.links),
         "ok": statuses.count(Status.OK),
@@ -36,21 +42,70 @@ def summary(result: ChainResult, runtime_s: float) -> dict[str, Any]:
         "all_ok": result.ok,
         "reused": len(result.reused),
         "runtime_s": runtime_s,
+        "network": {
+            "adjusted": sol.adjusted,
+            "links_by_kind": _count(link.kind.value for link in result.links),
+            "links_by_state": _count(f.state.value for f in sol.links),
+            "rejected_links": [
+                f"{result.names[k.target]} <- {result.names[k.source]}: {f.reason}"
+                for k, f in zip(result.links, sol.links, strict=True)
+                if f.state.value == "rejected"
+            ],
+            "scans_by_status": _count(s.value for s in scans),
+            "scans_not_ok": {
+                result.names[k]: f"{s.status.value}: {s.reason}"
+                for k, s in enumerate(sol.scans)
+                if s.status.value != "ok"
+            },
+            "loop_radius_m": None if np.isnan(result.loop_radius) else result.loop_radius,
+        },
     }
 
 
-def poses_text(result: ChainResult) -> str:
-    """``poses.txt``: a comment header, then name and T_world_scan of every posed scan."""
-    lines = [
-        "# T_world_scan per scan: file name, then 16 numbers of the 4x4, row-major (metres)",
-        f"# world frame = frame of {result.names[result.anchor]}; scans without a pose omitted",
+def _count(values: Any) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for v in values:
+        out[v] = out.get(v, 0) + 1
+    return out
+
+
+def _pose_lines(names: Any, poses: Any, what: str, anchor: str) -> list[str]:
+    return [
+        f"# {what}: file name, then 16 numbers of the 4x4, row-major (metres)",
+        f"# world frame = frame of {anchor}; scans without a pose omitted",
+        *(format_pose_line(n, T) for n, T in zip(names, poses, strict=True) if T is not None),
     ]
+
+
+def poses_text(result: ChainResult) -> str:
+    """``poses.txt``: T_world_scan of every ok scan; the others as comments with the reason."""
+    sol = result.solution
+    ok = [s.T_world_scan if s.status.value == "ok" else None for s in sol.scans]
+    lines = _pose_lines(result.names, ok, "T_world_scan per scan", result.names[result.anchor])
     lines += [
-        format_pose_line(name, T)
-        for name, T in zip(result.names, result.poses, strict=True)
-        if T is not None
+        f"# {name}: {s.status.value}: {s.reason}"
+        for name, s in zip(result.names, sol.scans, strict=True)
+        if s.status.value != "ok"
     ]
     return "\n".join(lines) + "\n"
+
+
+def chained_text(result: ChainResult) -> str:
+    """``poses_chain.txt``: the poses of the plain chain of adjacent ok links, not adjusted
+    (to compare with the adjusted ``poses.txt``)."""
+    what = "T_world_scan chained along adjacent ok links (not adjusted)"
+    lines = _pose_lines(result.names, result.solution.chained, what, result.names[result.anchor])
+    return "\n".join(lines) + "\n"
+
+
+def pose_files(result: ChainResult) -> dict[str, str]:
+    """``poses/T_world_<scan>.txt`` per ok scan: a 4x4 that CloudCompare's ``-APPLY_TRANS``
+    and PDAL's ``filters.transformation`` read as it is."""
+    return {
+        f"poses/T_world_{file_stem(name)}.txt": format_matrix(s.T_world_scan)
+        for name, s in zip(result.names, result.solution.scans, strict=True)
+        if s.status.value == "ok"
+    }
 
 
 def _header_poses_text(result: ChainResult) -> str | None:
@@ -70,14 +125,18 @@ def _header_poses_text(result: ChainResult) -> str | None:
 
 def chain_files(result: ChainResult, cfg: Config, runtime_s: float) -> dict[str, str]:
     """Every text output of a chain, by file name."""
-    names = result.names
+    names, sol = result.names, result.solution
+    pairs = [pair_row(k, names, f) for k, f in zip(result.links, sol.links, strict=True)]
+    poses = [
+        pose_row(k, n, s.T_world_scan, s)
+        for k, (n, s) in enumerate(zip(names, sol.scans, strict=True))
+    ]
     files = {
-        "pairs.csv": csv_text([pair_row(k, names) for k in result.links], PAIR_COLUMNS),
-        "poses.csv": csv_text(
-            [pose_row(k, n, T) for k, (n, T) in enumerate(zip(names, result.poses, strict=True))],
-            POSE_COLUMNS,
-        ),
+        "pairs.csv": csv_text(pairs, PAIR_COLUMNS),
+        "poses.csv": csv_text(poses, POSE_COLUMNS),
         "poses.txt": poses_text(result),
+        "poses_chain.txt": chained_text(result),
+        **pose_files(result),
     }
     for link in result.links:
         if link.T_target_source is not None:
@@ -98,4 +157,5 @@ def write_chain_outputs(out: Path, result: ChainResult, cfg: Config, runtime_s: 
     png = topview_png(result)
     if png is not None:
         files["topview.png"] = png
+    files["report.html"] = chain_report(result, files["config_used.yaml"], runtime_s, png)
     publish(Path(out), files)

@@ -44,50 +44,59 @@ def print_summary(result: RegistrationResult, console: Any) -> None:
 
 
 def print_chain_summary(result: ChainResult, console: Any) -> None:
-    """A rich table with one row per link."""
+    """A rich table with one row per link, and one per scan that is not ok."""
     from rich.table import Table
 
-    columns = ("link", "target", "source", "tx (m)", "ty (m)", "yaw (deg)", "score/pt", "overlap")
-    table = Table(*columns, "status", title="ndt-chain")
-    for link in result.links:
-        row = pair_row(link, result.names)
+    columns = ("link", "kind", "target", "source", "tx (m)", "ty (m)", "yaw (deg)", "score/pt")
+    table = Table(*columns, "status", "network", "residual (cm)", title="ndt-chain links")
+    sol = result.solution
+    for link, fit in zip(result.links, sol.links, strict=True):
+        row = pair_row(link, result.names, fit)
+        status = link.status.value if not link.reason else f"{link.status.value}: {link.reason}"
         table.add_row(
             str(link.index),
+            link.kind.value,
             row["target"],
             row["source"],
             row["tx"][:9],
             row["ty"][:9],
             row["yaw_deg"][:9],
             row["score_per_point"][:6],
-            row["overlap"][:5],
-            link.status.value if not link.reason else f"{link.status.value}: {link.reason}",
+            status,
+            row["network"] + (f": {fit.reason}" if fit.state.value == "rejected" else ""),
+            row["residual_cm"],
         )
     console.print(table)
+    bad = [(k, s) for k, s in enumerate(sol.scans) if s.status.value != "ok"]
+    if bad:
+        scans = Table("scan", "status", "reason", title="scans that are not ok")
+        for k, s in bad:
+            scans.add_row(result.names[k], s.status.value, s.reason)
+        console.print(scans)
+    n_ok = len(sol.scans) - len(bad)
+    console.print(f"{n_ok} of {len(sol.scans)} scans ok" + (" (adjusted)" if sol.adjusted else ""))
 
 
 def print_evaluation(ev: Any, console: Any) -> None:
     """Per-link errors, success rates and the end-of-chain drift of an evaluation."""
     from rich.table import Table
 
-    table = Table(
-        "target", "source", "rotation error (deg)", "translation error (cm)", title="ndt-eval"
-    )
+    network = any("network" in row for row in ev.links)
+    columns = ["target", "source", "rotation error (deg)", "translation error (cm)"]
+    table = Table(*columns, *(["network"] if network else []), title="ndt-eval")
     for row in ev.links:
-        table.add_row(
-            row["target"],
-            row["source"],
-            f"{row['rotation_error_deg']:.4f}",
-            f"{100 * row['translation_error_m']:.2f}",
-        )
+        cells = [row["target"], row["source"], f"{row['rotation_error_deg']:.4f}"]
+        cells.append(f"{100 * row['translation_error_m']:.2f}")
+        table.add_row(*cells, *([row.get("network", "")] if network else []))
     console.print(table)
     for s in ev.success:
         console.print(
             f"success at {s['max_rotation_deg']:g} deg / {100 * s['max_translation_m']:g} cm: "
             f"{100 * s['success_rate']:.0f} %"
         )
-    if ev.drift:
-        d = ev.drift
-        console.print(
-            f"end-of-chain drift ({d['to']} in the frame of {d['from']}): "
-            f"{d['rotation_error_deg']:.4f} deg, {100 * d['translation_error_m']:.2f} cm"
-        )
+    for label, d in (("end-of-chain drift", ev.drift), ("chained, not adjusted", ev.drift_chained)):
+        if d:
+            console.print(
+                f"{label} ({d['to']} in the frame of {d['from']}): "
+                f"{d['rotation_error_deg']:.4f} deg, {100 * d['translation_error_m']:.2f} cm"
+            )

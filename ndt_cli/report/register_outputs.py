@@ -14,24 +14,36 @@ from ndt_cli.io.matrices import format_matrix
 from ndt_cli.io.outdir import publish
 from ndt_cli.io.serialize import csv_text, to_json
 from ndt_cli.ndt.result import RegistrationResult
+from ndt_cli.report.html_report import register_report
 from ndt_cli.report.tables import REPORT_COLUMNS, report_row
+
+
+def _with_files(data: dict) -> dict:
+    """The result's dict plus the absolute paths of its scan files (for ``ndt-export``)."""
+    for end in ("target", "source"):
+        label = data.get(end)
+        if label and label != "<array>":
+            data[f"{end}_file"] = str(Path(label).resolve())
+    return data
 
 
 def register_files(result: RegistrationResult, cfg: Config) -> dict[str, str]:
     """Every output of a registration, by file name."""
+    config = dump(cfg)
     return {
         "T_target_source.txt": format_matrix(result.T_target_source),
         "report.csv": csv_text([report_row(result)], REPORT_COLUMNS),
-        "result.json": to_json(result.to_dict()),
-        "config_used.yaml": dump(cfg),
+        "result.json": to_json(_with_files(result.to_dict())),
+        "config_used.yaml": config,
+        "report.html": register_report(result, config),
     }
 
 
 def write_register_outputs(
     out_dir: str | Path, result: RegistrationResult, cfg: Config
 ) -> list[Path]:
-    """Publish T_target_source.txt, report.csv, result.json and config_used.yaml as the content
-    of ``out_dir``, all together."""
+    """Publish T_target_source.txt, report.csv, result.json, config_used.yaml and report.html
+    as the content of ``out_dir``, all together."""
     out = Path(out_dir)
     files = register_files(result, cfg)
     publish(out, files)

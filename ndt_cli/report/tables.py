@@ -68,10 +68,15 @@ REPORT_COLUMNS = _names(
     "iterations_per_level converged status warnings runtime_s",
 )
 PAIR_COLUMNS = _names(
-    "link target source", _POSE_AND_FIT, "degenerate iterations converged runtime_s status reason"
+    "link target source",
+    _POSE_AND_FIT,
+    "degenerate iterations converged runtime_s status reason",
+    "kind network residual_deg residual_cm",
 )
 POSE_COLUMNS = _names(
-    "scan file has_pose x y z yaw_deg", *(f"m{r}{c}" for r in range(4) for c in range(4))
+    "scan file has_pose x y z yaw_deg",
+    *(f"m{r}{c}" for r in range(4) for c in range(4)),
+    "status sigma_x_cm sigma_y_cm sigma_z_cm sigma_yaw_deg reason",
 )
 
 
@@ -88,16 +93,23 @@ def report_row(result: RegistrationResult) -> dict[str, Any]:
     return {"target": result.target, "source": result.source, **metrics(result, REPORT_COLUMNS)}
 
 
-def pair_row(link: Any, names: tuple[str, ...]) -> dict[str, Any]:
-    """The row of ``pairs.csv`` of a chain's link (``names``: the scans' names)."""
+def pair_row(link: Any, names: tuple[str, ...], fit: Any = None) -> dict[str, Any]:
+    """The row of ``pairs.csv`` of a campaign's link (``names``: the scans' names; ``fit``:
+    what the network made of it, a :class:`~ndt_cli.pipeline.solution.LinkFit`)."""
     row = {"link": link.index, "target": names[link.target], "source": names[link.source]}
     row.update(metrics(link.result, PAIR_COLUMNS))
-    row.update(status=link.status.value, reason=link.reason)
+    row.update(status=link.status.value, reason=link.reason, kind=link.kind.value)
+    residual = None if fit is None else fit.residual
+    row["network"] = "" if fit is None else fit.state.value
+    row["residual_deg"] = "" if residual is None else num(residual.rotation_deg, 4)
+    row["residual_cm"] = "" if residual is None else num(100 * residual.translation_m, 2)
     return row
 
 
-def pose_row(k: int, name: str, T: np.ndarray | None) -> dict[str, Any]:
-    """The row of ``poses.csv`` of scan ``k``: its name and T_world_scan (empty without one)."""
+def pose_row(k: int, name: str, T: np.ndarray | None, scan: Any = None) -> dict[str, Any]:
+    """The row of ``poses.csv`` of scan ``k``: its name, T_world_scan (empty without one) and,
+    from the network (a :class:`~ndt_cli.pipeline.solution.ScanPose`), its status, 1-sigma
+    uncertainty and why it is not ok."""
     row: dict[str, Any] = {"scan": k, "file": name, "has_pose": str(T is not None).lower()}
     M = T if T is not None else np.full((4, 4), np.nan)
     row.update(x=num(M[0, 3]), y=num(M[1, 3]), z=num(M[2, 3]))
@@ -105,4 +117,15 @@ def pose_row(k: int, name: str, T: np.ndarray | None) -> dict[str, Any]:
     row.update(
         {f"m{r}{c}": ("" if T is None else f"{M[r, c]:.17g}") for r in range(4) for c in range(4)}
     )
+    sigma = None if scan is None else scan.sigma
+    row["status"] = "" if scan is None else scan.status.value
+    row["reason"] = "" if scan is None else scan.reason
+    for key, value, scale, digits in zip(
+        ("sigma_x_cm", "sigma_y_cm", "sigma_z_cm", "sigma_yaw_deg"),
+        sigma if sigma is not None else [np.nan] * 4,
+        (100, 100, 100, 1),
+        (2, 2, 2, 4),
+        strict=True,
+    ):
+        row[key] = num(scale * value, digits)
     return row

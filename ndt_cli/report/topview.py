@@ -1,39 +1,79 @@
-"""Top view of a chain: every scan's slice points in the world frame, standpoints and links.
+"""Top view of a campaign: every posed scan's slice points in the world frame, the scanner
+positions marked by status, and every link coloured by its residual after the adjustment.
 
 Needs matplotlib (extra ``[plot]``); without it, one notice is logged and no picture is made.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
+import numpy as np
+
 from ndt_cli.pipeline.chain import ChainResult
 from ndt_cli.report.figures import png_bytes, pyplot
 
+_MARKERS = {"ok": ("^", "black"), "suspect": ("s", "darkorange")}
+
+
+def _points(ax: Any, result: ChainResult, colours: Any) -> None:
+    for k, scan in enumerate(result.solution.scans):
+        T, pts = scan.T_world_scan, result.previews.get(k)
+        if T is None:
+            continue
+        if pts is not None:
+            w = pts @ T[:3, :3].T + T[:3, 3]
+            ax.scatter(w[:, 0], w[:, 1], s=0.3, color=colours(k % 10), label=result.names[k])
+        marker, colour = _MARKERS.get(scan.status.value, ("x", "red"))
+        ax.plot(T[0, 3], T[1, 3], marker, color=colour, ms=8)
+        label = str(k) if scan.status.value == "ok" else f"{k} {scan.status.value}"
+        ax.annotate(label, (T[0, 3], T[1, 3]), textcoords="offset points", xytext=(4, 4))
+
+
+def _links(ax: Any, result: ChainResult, plt: Any) -> Any:
+    """Draw the links; returns the colour mapping of the residuals (for a colour bar)."""
+    sol, poses = result.solution, result.poses
+    res = [
+        f.residual.translation_m * 100
+        for f in sol.links
+        if f.residual is not None and f.state.value != "rejected"
+    ]
+    top = max(1.0, float(np.percentile(res, 95))) if res else 1.0
+    cmap = plt.get_cmap("viridis")
+    for link, fit in zip(result.links, sol.links, strict=True):
+        a, b = poses[link.target], poses[link.source]
+        if a is None or b is None:
+            continue
+        xy = ([a[0, 3], b[0, 3]], [a[1, 3], b[1, 3]])
+        if fit.state.value == "rejected" or (not link.ok and fit.state.value == "unused"):
+            ax.plot(*xy, "--", color="red", lw=1.2)
+        elif fit.residual is None:
+            ax.plot(*xy, "-", color="green" if link.ok else "grey", lw=1.5)
+        else:
+            ax.plot(*xy, "-", color=cmap(min(fit.residual.translation_m * 100 / top, 1.0)), lw=2)
+    return plt.cm.ScalarMappable(cmap=cmap, norm=plt.Normalize(0, top)) if res else None
+
 
 def topview_png(result: ChainResult) -> bytes | None:
-    """``topview.png``: slice points of every posed scan (from the pipeline's previews),
-    standpoints, and links (green ok, red not ok); None without matplotlib."""
+    """``topview.png``, or None without matplotlib."""
     plt = pyplot()
     if plt is None:
         return None
     fig, ax = plt.subplots(figsize=(10, 8), dpi=120)
-    colours = plt.get_cmap("tab10")
-    for k, T in enumerate(result.poses):
-        if T is None:
-            continue
-        pts = result.previews.get(k)
-        if pts is not None:
-            w = pts @ T[:3, :3].T + T[:3, 3]
-            ax.scatter(w[:, 0], w[:, 1], s=0.3, color=colours(k % 10), label=result.names[k])
-        ax.plot(T[0, 3], T[1, 3], "k^", ms=7)
-        ax.annotate(str(k), (T[0, 3], T[1, 3]), textcoords="offset points", xytext=(4, 4))
-    for link in result.links:
-        a, b = result.poses[link.target], result.poses[link.source]
-        if a is not None and b is not None:
-            style = "g-" if link.ok else "r--"
-            ax.plot([a[0, 3], b[0, 3]], [a[1, 3], b[1, 3]], style, lw=1.5)
+    _points(ax, result, plt.get_cmap("tab10"))
+    mapping = _links(ax, result, plt)
+    if mapping is not None:
+        fig.colorbar(mapping, ax=ax, shrink=0.6, label="link residual after adjustment (cm)")
     ax.set_aspect("equal")
     ax.set_xlabel("x world (m)")
     ax.set_ylabel("y world (m)")
-    ax.set_title("Chained scans (slice points), standpoints and links (green ok, red not ok)")
-    ax.legend(markerscale=20, fontsize="small", loc="best")
+    not_ok = [
+        result.names[k] for k, s in enumerate(result.solution.scans) if s.status.value != "ok"
+    ]
+    ax.set_title(
+        "Scans (slice points) and links (red dashed: rejected or failed)"
+        + (f"\nnot ok: {', '.join(not_ok)}" if not_ok else "")
+    )
+    if result.previews:
+        ax.legend(markerscale=20, fontsize="small", loc="best")
     return png_bytes(fig)

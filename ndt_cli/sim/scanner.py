@@ -243,6 +243,7 @@ def make_sequence(
     corridor: bool = False,
     tilt_deg: float = 0.0,
     scan_kwargs: dict[str, Any] | None = None,
+    positions: np.ndarray | None = None,
 ) -> tuple[Scene, list[np.ndarray], list[np.ndarray]]:
     """Scan a street (``make_street(seed, corridor=corridor)``) from ``n_scans`` standpoints.
 
@@ -251,6 +252,8 @@ def make_sequence(
     height 1.6 m, yaw uniform in [-180, 180) deg and roll/pitch uniform in +-``tilt_deg`` deg.
     All draws come from ``np.random.default_rng(seed)``. ``scan_kwargs`` is passed on to
     :func:`simulate_scan` (its ``seed`` defaults to a per-scan seed from the same generator).
+    ``positions`` ((n_scans, 2), world x, y in m) places the standpoints instead (a walk that
+    comes back to its start, say); headings and tilts are drawn as before.
 
     Returns ``(scene, scans, poses)``: each scan is (N, 3) in its own scanner frame, each pose
     its 4x4 ``T_world_scan``.
@@ -265,6 +268,8 @@ def make_sequence(
     xs = np.concatenate([[0.0], np.cumsum(rng.uniform(lo, hi, n_scans - 1))])
     xs -= 0.5 * (xs[0] + xs[-1])
     ys = rng.uniform(-3.0, 3.0, n_scans)
+    if positions is not None:
+        xs, ys = np.asarray(positions, dtype=float).reshape(n_scans, 2).T
     yaws = rng.uniform(-180.0, 180.0, n_scans)
     rolls = rng.uniform(-tilt_deg, tilt_deg, n_scans) if tilt_deg > 0 else np.zeros(n_scans)
     pitches = rng.uniform(-tilt_deg, tilt_deg, n_scans) if tilt_deg > 0 else np.zeros(n_scans)

@@ -1,0 +1,207 @@
+"""From a campaign's links to a pose and a status per scan.
+
+With the adjustment (the default), every link with a transform becomes an edge of the pose
+graph: ``ok`` links are trusted, ``suspect`` and ``degenerate`` ones must be confirmed by the
+others (:mod:`ndt_cli.pipeline.verify`); each scan is ``ok`` when accepted links connect it to
+the anchor, ``suspect`` when only untested links reach it, ``unposed`` otherwise. Without it,
+poses are the products of ok links along the fewest links from the anchor (one neighbour: the
+classic chain), and a scan reached through anything but ok links is not ``ok``.
+
+Frames: the world is the anchor scan's own frame. The graph works between the scans' reduced
+frames (each scan minus its reduction point), so that georeferenced coordinates never enter it;
+``T_world_scan = T(r_anchor) X_scan T(-r_scan)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ndt_cli.ndt.result import RegistrationResult, Status
+from ndt_cli.pipeline.covariance import icp_covariance, ndt_covariance
+from ndt_cli.pipeline.graph import Edge, EdgeResidual
+from ndt_cli.pipeline.links import Link
+from ndt_cli.pipeline.network import LinkKind
+from ndt_cli.pipeline.verify import EdgeState, NodeStatus, NodeVerdict, verify
+
+USABLE = (Status.OK, Status.SUSPECT, Status.DEGENERATE)  # links whose transform can be tested
+
+
+@dataclass(frozen=True)
+class ScanPose:
+    """A scan's status, ``T_world_scan`` (None when unposed), 1-sigma uncertainty (world axes:
+    x, y, z in m and yaw in degrees; None without an adjustment) and the reason when not ok."""
+
+    status: NodeStatus
+    T_world_scan: np.ndarray | None
+    sigma: np.ndarray | None = None  # (4,): x, y, z (m), yaw (deg)
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class LinkFit:
+    """What the network made of a link: its state and its residual after the adjustment."""
+
+    state: EdgeState
+    residual: EdgeResidual | None = None
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class NetworkSolution:
+    """Per scan a :class:`ScanPose`, per link (by position) a :class:`LinkFit`, the poses of
+    the plain chain of adjacent ok links, and whether the network was adjusted."""
+
+    scans: tuple[ScanPose, ...]
+    links: tuple[LinkFit, ...]
+    chained: tuple[np.ndarray | None, ...]
+    adjusted: bool
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def poses(self) -> tuple[np.ndarray | None, ...]:
+        return tuple(s.T_world_scan for s in self.scans)
+
+
+def link_covariance(r: RegistrationResult) -> np.ndarray:
+    """6x6 covariance of a link between the reduced frames (GTSAM Pose3 tangent, see
+    :mod:`ndt_cli.pipeline.covariance`): from ICP's normal matrix when ICP refined it, else
+    from the NDT Hessian."""
+    refined = r.icp_hessian is not None and np.isfinite(r.icp_rms) and r.icp_centroid is not None
+    rejected = any(w.startswith("ICP refinement rejected") for w in r.warnings)
+    if refined and not rejected:
+        return icp_covariance(r.icp_hessian, r.icp_centroid, r.T_reduced, r.icp_rms)
+    return ndt_covariance(
+        r.hessian, r.T_reduced, level_target=r.level_target, level_source=r.level_source
+    )
+
+
+def _translation(v: np.ndarray) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = v
+    return T
+
+
+def reductions(n_scans: int, links: Sequence[Link]) -> list[np.ndarray | None]:
+    """Each scan's reduction point (scan frame, m), from any link that registered it."""
+    out: list[np.ndarray | None] = [None] * n_scans
+    for link in links:
+        if link.result is not None:
+            out[link.target] = link.result.reduction_target
+            out[link.source] = link.result.reduction_source
+    return out
+
+
+def chained(n_scans: int, links: Sequence[Link], anchor: int, kinds: set) -> list:
+    """``T_world_scan`` per scan: products of the ok links of ``kinds`` along the fewest
+    links from the anchor, in the scans' own frames (the classic chain)."""
+    poses: list[np.ndarray | None] = [None] * n_scans
+    poses[anchor] = np.eye(4)
+    usable = sorted(
+        (k for k in links if k.ok and k.kind in kinds), key=lambda k: (k.source - k.target, k.index)
+    )
+    changed = True
+    while changed:
+        changed = False
+        for link in usable:
+            i, j, T = link.target, link.source, link.T_target_source
+            if poses[i] is not None and poses[j] is None:
+                poses[j], changed = poses[i] @ T, True
+            elif poses[j] is not None and poses[i] is None:
+                poses[i], changed = poses[j] @ np.linalg.inv(T), True
+    return poses
+
+
+def solve(
+    n_scans: int,
+    anchor: int,
+    links: Sequence[Link],
+    adjust: bool,
+    unreadable: dict[int, str],
+) -> NetworkSolution:
+    """The pose and status of every scan, and the state of every link."""
+    plain = tuple(chained(n_scans, links, anchor, {LinkKind.ADJACENT}))
+    if adjust:
+        return _adjusted(n_scans, anchor, links, unreadable, plain)
+    poses = chained(n_scans, links, anchor, set(LinkKind))
+    scans = tuple(
+        ScanPose(NodeStatus.OK, T)
+        if T is not None
+        else ScanPose(NodeStatus.UNPOSED, None, reason=_why_unposed(k, links, unreadable))
+        for k, T in enumerate(poses)
+    )
+    fits = tuple(
+        LinkFit(EdgeState.USED if k.ok else EdgeState.UNUSED, reason=k.reason) for k in links
+    )
+    return NetworkSolution(scans, fits, plain, adjusted=False)
+
+
+def _why_unposed(k: int, links: Sequence[Link], unreadable: dict[int, str]) -> str:
+    if k in unreadable:
+        return f"unreadable: {unreadable[k]}"
+    mine = [x for x in links if k in (x.target, x.source)]
+    if not mine:
+        return "no link"
+    return "no ok link connects it to the anchor: " + "; ".join(
+        f"link {x.target}-{x.source} {x.status.value}" for x in mine
+    )
+
+
+def _adjusted(
+    n_scans: int,
+    anchor: int,
+    links: Sequence[Link],
+    unreadable: dict[int, str],
+    plain: tuple[np.ndarray | None, ...],
+) -> NetworkSolution:
+    """Verify and adjust the network of usable links; map nodes and edges back."""
+    used = [k for k, link in enumerate(links) if link.status in USABLE]
+    red = reductions(n_scans, links)
+    if red[anchor] is None:
+        scans = tuple(
+            ScanPose(NodeStatus.UNPOSED, None, reason="the anchor scan has no usable link")
+            for _ in range(n_scans)
+        )
+        fits = tuple(LinkFit(EdgeState.UNUSED, reason=k.reason) for k in links)
+        return NetworkSolution(scans, fits, plain, adjusted=True)
+    edges = [
+        Edge(
+            links[k].target,
+            links[k].source,
+            links[k].result.T_reduced,
+            link_covariance(links[k].result),
+            trusted=links[k].ok,
+        )
+        for k in used
+    ]
+    v = verify(n_scans, anchor, edges)
+    scans = tuple(_scan_pose(node, red, anchor, unreadable, links) for node in v.nodes)
+    fits = [LinkFit(EdgeState.UNUSED, reason=k.reason or k.status.value) for k in links]
+    for verdict, k in zip(v.edges, used, strict=True):
+        fits[k] = LinkFit(verdict.state, verdict.residual, verdict.reason)
+    return NetworkSolution(scans, tuple(fits), plain, adjusted=True, timings=dict(v.timings))
+
+
+def _scan_pose(
+    node: NodeVerdict,
+    red: Sequence[np.ndarray | None],
+    anchor: int,
+    unreadable: dict[int, str],
+    links: Sequence[Link],
+) -> ScanPose:
+    """A node's verdict as a scan's pose in the world (the anchor's own frame)."""
+    k = node.index
+    if node.pose is None or red[k] is None:
+        reason = _why_unposed(k, links, unreadable) if k in unreadable else node.reason
+        return ScanPose(NodeStatus.UNPOSED, None, reason=reason)
+    T = _translation(red[anchor]) @ node.pose @ _translation(-red[k])
+    sigma = None
+    if node.covariance is not None:
+        R = node.pose[:3, :3]
+        cov_t = R @ node.covariance[3:, 3:] @ R.T  # position, world axes
+        cov_r = R @ node.covariance[:3, :3] @ R.T
+        sigma = np.array([*np.sqrt(np.diag(cov_t)), np.degrees(np.sqrt(cov_r[2, 2]))])
+    reason = "" if node.status is NodeStatus.OK else node.reason
+    return ScanPose(node.status, T, sigma, reason)
