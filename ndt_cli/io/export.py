@@ -1,0 +1,459 @@
+"""Write the registered point cloud of many scans, every point attribute and the CRS kept.
+
+:func:`export` streams each scan's points through :mod:`ndt_cli.io.records`, maps them to the
+world frame with the scan's ``T_world_file`` and writes, by the extension of ``out``:
+
+- ``.las`` / ``.laz``: one merged file (:mod:`ndt_cli.io.export_las`: the point format holding
+  every input's dimensions, the union of extra bytes, an extra-bytes ``scan_index`` (uint16) per
+  point, the anchor scan's CRS records copied byte for byte, 1 mm scales, offsets at the centre
+  of the world bounding box);
+- ``.ply``: binary little-endian, x/y/z float64 plus every attribute and ``scan_index``;
+- ``.e57``: one scan per station, points in the scanner frame (``S_scan_file`` applied), the
+  pose ``T_world_scan`` in the scan header (:mod:`ndt_cli.io.export_other`).
+
+With ``per_scan_dir``, one file per scan is written there instead (in ``out``'s format), named
+after the scan. ``voxel`` thins to one point per cube of the world frame (the first point met:
+scans in the given order, points in file order). Points that are not finite or exactly (0,0,0)
+in the file (no-return points) are dropped, as everywhere in ndt-cli.
+
+Memory stays bounded: one chunk of ``chunk_points`` points at a time (a process peaks at about
+0.3-0.4 GB with the default 1 M, whatever the number of points), plus, with ``voxel``, 8 bytes
+per occupied voxel (16 while a chunk's new voxels are merged in). Every file is written to a
+temporary file beside its target and renamed when complete: a failure leaves nothing behind.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import re
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+
+from ndt_cli.errors import InputError, OutputError
+from ndt_cli.io.atomic import atomic_path
+from ndt_cli.io.records import CHUNK_POINTS, Chunk, Summary, iter_records, summary
+
+log = logging.getLogger(__name__)
+
+EXPORT_SUFFIXES = (".las", ".laz", ".ply", ".e57")
+SCAN_INDEX = "scan_index"
+"""Name of the per-point scan number (uint16, :attr:`ExportScan.index`) in every output."""
+
+Progress = Callable[[int, int], None]
+"""``progress(points_done, points_total)``: points read so far and in all inputs."""
+
+
+@dataclass(frozen=True, eq=False)
+class ExportScan:
+    """One scan to export.
+
+    ``path``: its point file (``FILE.e57#K`` for scan K of a multi-scan E57). ``name``: its
+    unique name in the outputs (per-scan files are named after it). ``index``: its number, stored
+    per point as ``scan_index`` (0..65535). ``T_world_file``: 4x4 mapping the file's raw
+    coordinates (before ``input.scale`` / ``input.axes``) to the world frame, metres, i.e.
+    ``T_world_scan @ S_scan_file``. ``S_scan_file``: 4x4 from raw file coordinates to the scanner
+    frame (``input.scale`` times ``axes_matrix(input.axes)``; identity by default), used by the
+    E57 output only. ``anchor``: the scan whose CRS the outputs carry (default: the first).
+    """
+
+    path: str | Path
+    name: str
+    index: int
+    T_world_file: np.ndarray
+    S_scan_file: np.ndarray = field(default_factory=lambda: np.eye(4))
+    anchor: bool = False
+
+    def __post_init__(self) -> None:
+        for attr in ("T_world_file", "S_scan_file"):
+            m = np.array(getattr(self, attr), dtype=np.float64)
+            if m.shape != (4, 4) or not np.isfinite(m).all():
+                raise ValueError(f"{attr} of scan {self.name!r} must be a finite 4x4 matrix")
+            m.setflags(write=False)
+            object.__setattr__(self, attr, m)
+        if not 0 <= int(self.index) <= 65535:
+            raise ValueError(f"scan index {self.index} of {self.name!r} is not in 0..65535")
+
+    @classmethod
+    def from_pose(
+        cls,
+        path: str | Path,
+        name: str,
+        index: int,
+        T_world_scan: np.ndarray,
+        *,
+        scale: float = 1.0,
+        axes: str = "x,y,z",
+        anchor: bool = False,
+    ) -> ExportScan:
+        """A scan from its registered pose ``T_world_scan`` (scanner frame to world, metres) and
+        the ``input.scale`` / ``input.axes`` its file needs (see ``InputConfig``)."""
+        from ndt_cli.config import axes_matrix
+
+        S = np.eye(4)
+        S[:3, :3] = scale * axes_matrix(axes)
+        return cls(path, name, index, np.asarray(T_world_scan, float) @ S, S, anchor)
+
+    @property
+    def T_world_scan(self) -> np.ndarray:
+        """4x4 pose: scanner frame (metres) to world frame, ``T_world_file @ inv(S_scan_file)``."""
+        return self.T_world_file @ np.linalg.inv(self.S_scan_file)
+
+
+@dataclass(frozen=True)
+class ExportResult:
+    """What :func:`export` wrote. Counts are points; ``points_read`` includes dropped ones."""
+
+    paths: tuple[Path, ...]
+    points_read: int
+    points_written: int
+    points_dropped: int  # not finite, or exactly (0,0,0) in the file
+    points_thinned: int  # removed by the voxel filter
+    written_per_scan: tuple[int, ...]
+    point_format: int | None = None  # LAS point format written (LAS/LAZ only)
+
+
+@dataclass(frozen=True)
+class ScanInput:
+    """A scan with its header summary and, after a first pass when the header has none, its
+    bounding box (file frame, m) and the (min, max) of its float attributes."""
+
+    scan: ExportScan
+    summary: Summary
+    count: int
+    bounds: tuple[np.ndarray, np.ndarray] | None
+    ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
+
+    def world_bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Box around the 8 corners of ``bounds`` in the world frame (m), or None."""
+        if self.bounds is None:
+            return None
+        lo, hi = self.bounds
+        corners = np.array(
+            [[a[0], b[1], c[2]] for a in (lo, hi) for b in (lo, hi) for c in (lo, hi)]
+        )
+        world = corners @ self.scan.T_world_file[:3, :3].T + self.scan.T_world_file[:3, 3]
+        return world.min(axis=0), world.max(axis=0)
+
+
+class Sink(Protocol):
+    """A file being written: scans arrive one after the other, in chunks."""
+
+    def begin(self, item: ScanInput) -> None: ...
+
+    def write(self, chunk: Chunk, world: np.ndarray) -> None:
+        """Points of the current scan: ``chunk`` as read (file frame), ``world`` (m,3) in the
+        world frame (m)."""
+
+    def end(self) -> None: ...
+
+    def close(self) -> None:
+        """Finish the file (after the last scan)."""
+
+    def abort(self) -> None:
+        """Release the file after a failure (the caller removes it)."""
+
+
+class FirstPointThinner:
+    """One point per ``voxel`` metre cube of the world frame: the first one met.
+
+    Voxel indices are taken relative to ``lo`` (with a margin) and packed into one int64 key;
+    only the sorted keys of the occupied voxels are kept (8 bytes per voxel).
+    """
+
+    def __init__(self, voxel: float, lo: np.ndarray, hi: np.ndarray) -> None:
+        if not voxel > 0:
+            raise ValueError(f"voxel must be > 0 m, got {voxel}")
+        margin = 1.0 + 0.01 * float(np.max(hi - lo))
+        self.voxel = float(voxel)
+        self.origin = np.floor((lo - margin) / voxel)
+        self.size = np.floor((hi + margin) / voxel) - self.origin + 1
+        bits = np.ceil(np.log2(self.size + 1)).astype(np.int64)
+        if bits.sum() > 62:
+            raise OutputError(
+                f"voxel {voxel} m is too small for an extent of {np.max(hi - lo):.0f} m"
+            )
+        self.shifts = (int(bits[1] + bits[2]), int(bits[2]), 0)
+        self.occupied = np.empty(0, dtype=np.int64)
+
+    def keep(self, world: np.ndarray) -> np.ndarray:
+        """Boolean mask of the (m,3) world points (m) that open a new voxel."""
+        ijk = np.floor(world / self.voxel) - self.origin
+        if len(ijk) and ((ijk < 0).any() or (ijk >= self.size).any()):
+            raise InputError("points lie outside the bounding box the header announces")
+        ijk = ijk.astype(np.int64)
+        keys = (ijk[:, 0] << self.shifts[0]) | (ijk[:, 1] << self.shifts[1]) | ijk[:, 2]
+        uniq, first = np.unique(keys, return_index=True)
+        pos = np.searchsorted(self.occupied, uniq)
+        seen = np.zeros(len(uniq), dtype=bool)
+        inside = pos < len(self.occupied)
+        seen[inside] = self.occupied[pos[inside]] == uniq[inside]
+        self.occupied = np.insert(self.occupied, pos[~seen], uniq[~seen])
+        mask = np.zeros(len(keys), dtype=bool)
+        mask[first[~seen]] = True
+        return mask
+
+
+def _first_pass(scan: ExportScan, summ: Summary, chunk_points: int) -> ScanInput:
+    """Count, bounding box (file frame, usable points) and float ranges, from the points."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    ranges: dict[str, tuple[float, float]] = {}
+    n = 0
+    for chunk in iter_records(scan.path, chunk_points):
+        n += len(chunk["x"])
+        xyz = _usable(chunk)
+        if xyz.any():
+            pts = np.column_stack([chunk[a][xyz] for a in "xyz"])
+            lo, hi = np.minimum(lo, pts.min(axis=0)), np.maximum(hi, pts.max(axis=0))
+        for name, values in chunk.items():
+            if name in ("x", "y", "z") or values.dtype.kind != "f":
+                continue
+            finite = values[np.isfinite(values)]
+            if finite.size:
+                a, b = ranges.get(name, (np.inf, -np.inf))
+                ranges[name] = (min(a, float(finite.min())), max(b, float(finite.max())))
+    bounds = (lo, hi) if np.isfinite(lo).all() else None
+    return ScanInput(scan, summ, n, bounds, ranges)
+
+
+def _usable(chunk: Chunk) -> np.ndarray:
+    """Mask of the points that are finite and not exactly (0,0,0) in the file."""
+    x, y, z = chunk["x"], chunk["y"], chunk["z"]
+    return np.isfinite(x + y + z) & ((x != 0.0) | (y != 0.0) | (z != 0.0))
+
+
+def _inputs(scans: Sequence[ExportScan], need_bounds: bool, chunk_points: int) -> list[ScanInput]:
+    """Summaries of the scans, with a first pass over those whose header lacks what is needed."""
+    out = []
+    for scan in scans:
+        summ = summary(scan.path)
+        if summ.count is None or (need_bounds and summ.bounds is None):
+            out.append(_first_pass(scan, summ, chunk_points))
+        else:
+            out.append(ScanInput(scan, summ, summ.count, summ.bounds))
+    return out
+
+
+def _union_bounds(inputs: Sequence[ScanInput]) -> tuple[np.ndarray, np.ndarray]:
+    boxes = [b for b in (i.world_bounds() for i in inputs) if b is not None]
+    if not boxes:
+        return np.zeros(3), np.zeros(3)
+    return np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
+
+
+def _check(scans: Sequence[ExportScan], out: Path) -> str:
+    """The output suffix, after checking the scans (unique names and indices, one anchor)."""
+    suffix = out.suffix.lower()
+    if suffix not in EXPORT_SUFFIXES:
+        known = " ".join(EXPORT_SUFFIXES)
+        shown = suffix or "(no extension)"
+        raise OutputError(f"cannot export to {shown!r}; supported: {known}", out)
+    if not scans:
+        raise ValueError("no scans to export")
+    for what in ("name", "index"):
+        values = [getattr(s, what) for s in scans]
+        if len(set(values)) != len(values):
+            raise ValueError(f"scan {what}s must be unique, got {values}")
+    if sum(s.anchor for s in scans) > 1:
+        raise ValueError("at most one scan can be the anchor")
+    return suffix
+
+
+def anchor_of(scans: Sequence[ExportScan]) -> ExportScan:
+    """The scan marked ``anchor``, or the first scan."""
+    return next((s for s in scans if s.anchor), scans[0])
+
+
+def per_scan_file_names(names: Sequence[str], suffix: str) -> list[str]:
+    """One file name per scan name, safe on every file system and unique (case-insensitively):
+    ``north/scan_1.laz`` -> ``north_scan_1.laz``, ``campaign.e57#2`` -> ``campaign_2.laz``."""
+    from ndt_cli.pipeline.scans import file_stem
+
+    out: list[str] = []
+    taken: set[str] = set()
+    for name in names:
+        stem = re.sub(r"[^A-Za-z0-9._-]+", "_", file_stem(name)).strip("._") or "scan"
+        candidate, k = stem, 1
+        while f"{candidate}{suffix}".lower() in taken:
+            k += 1
+            candidate = f"{stem}_{k}"
+        taken.add(f"{candidate}{suffix}".lower())
+        out.append(f"{candidate}{suffix}")
+    return out
+
+
+def _make_sink(
+    suffix: str,
+    tmp: Path,
+    inputs: list[ScanInput],
+    anchor: ExportScan,
+    target: Path,
+    chunk_points: int,
+) -> Sink:
+    if suffix in (".las", ".laz"):
+        from ndt_cli.io.export_las import LasSink
+
+        return LasSink(tmp, inputs, _union_bounds(inputs), anchor, target)
+    from ndt_cli.io.export_other import E57Sink, PlySink
+
+    if suffix == ".ply":
+        return PlySink(tmp, inputs)
+    return E57Sink(tmp, inputs, anchor, chunk_points)
+
+
+@dataclass
+class _Tally:
+    """Running point counts of one export."""
+
+    total: int
+    read: int = 0
+    dropped: int = 0
+    thinned: int = 0
+    written: dict[int, int] = field(default_factory=dict)
+
+
+def _scan_chunks(
+    item: ScanInput, thinner: FirstPointThinner | None, tally: _Tally, chunk_points: int
+) -> Iterator[tuple[Chunk, np.ndarray]]:
+    """The usable (and, with ``thinner``, kept) points of one scan: (chunk, world (m,3))."""
+    T = item.scan.T_world_file
+    for chunk in iter_records(item.scan.path, chunk_points):
+        m = len(chunk["x"])
+        tally.read += m
+        ok = _usable(chunk)
+        if not ok.all():
+            tally.dropped += m - int(ok.sum())
+            chunk = {k: v[ok] for k, v in chunk.items()}
+        xyz = np.column_stack([chunk["x"], chunk["y"], chunk["z"]])
+        world = xyz @ T[:3, :3].T + T[:3, 3]
+        if thinner is not None:
+            try:
+                keep = thinner.keep(world)
+            except InputError as exc:
+                raise InputError(exc.message, item.scan.path) from None
+            tally.thinned += len(keep) - int(keep.sum())
+            chunk, world = {k: v[keep] for k, v in chunk.items()}, world[keep]
+        yield chunk, world
+
+
+def _write(
+    sink: Sink,
+    group: Sequence[ScanInput],
+    thinner: FirstPointThinner | None,
+    tally: _Tally,
+    chunk_points: int,
+    progress: Progress | None,
+) -> None:
+    """Feed the scans of ``group`` to ``sink``, chunk by chunk, and finish the file."""
+    try:
+        for item in group:
+            sink.begin(item)
+            written = 0
+            for chunk, world in _scan_chunks(item, thinner, tally, chunk_points):
+                if len(world):
+                    sink.write(chunk, world)
+                written += len(world)
+                if progress is not None:
+                    progress(tally.read, tally.total)
+            sink.end()
+            tally.written[item.scan.index] = written
+    except BaseException:
+        sink.abort()
+        raise
+    sink.close()
+
+
+@contextlib.contextmanager
+def _removed_on_failure(folder: Path | None) -> Iterator[None]:
+    """Remove ``folder`` again if the block fails and the folder did not exist before (empty)."""
+    created = folder is not None and not folder.exists()
+    try:
+        yield
+    except BaseException:
+        if created and folder is not None:
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        raise
+
+
+def _write_files(
+    suffix: str,
+    targets: Sequence[Path],
+    groups: Sequence[list[ScanInput]],
+    anchor: ExportScan,
+    thinner: FirstPointThinner | None,
+    tally: _Tally,
+    chunk_points: int,
+    progress: Progress | None,
+) -> list[int | None]:
+    """Write ``groups[k]`` into ``targets[k]``: temporary files, renamed once all are complete
+    (none is left on failure). Returns the LAS point format of each file (None: not LAS)."""
+    formats = []
+    with contextlib.ExitStack() as stack:
+        tmps = [stack.enter_context(atomic_path(t)) for t in targets]
+        for tmp, group, t in zip(tmps, groups, targets, strict=True):
+            sink = _make_sink(suffix, tmp, group, anchor, t, chunk_points)
+            _write(sink, group, thinner, tally, chunk_points, progress)
+            formats.append(getattr(sink, "point_format", None))
+    return formats
+
+
+def export(
+    scans: Sequence[ExportScan],
+    out: str | Path,
+    *,
+    voxel: float | None = None,
+    per_scan_dir: str | Path | None = None,
+    chunk_points: int = CHUNK_POINTS,
+    progress: Progress | None = None,
+) -> ExportResult:
+    """Write the registered cloud of ``scans`` (see the module docstring) and say what was written.
+
+    ``out``: the merged file; its extension chooses the format (.las, .laz, .ply, .e57). With
+    ``per_scan_dir``, one file per scan is written into that folder instead, in ``out``'s
+    format (``out`` itself is not written). ``voxel``: thinning cube edge in metres (None: keep
+    every point). ``chunk_points``: points read and written at a time. ``progress``: called
+    after every chunk with (points read so far, points in all inputs).
+
+    Raises :class:`OutputError` (unwritable target, unsupported extension, incompatible extra
+    bytes, extent too large) and :class:`InputError` (unreadable input), each one line naming the
+    file; ValueError for a wrong ``scans`` list (duplicate names or indices, two anchors).
+    """
+    target = Path(out)
+    suffix = _check(scans, target)
+    if voxel is not None and not voxel > 0:
+        raise ValueError(f"voxel must be > 0 m, got {voxel}")
+    inputs = _inputs(scans, suffix in (".las", ".laz") or voxel is not None, chunk_points)
+    thinner = None if voxel is None else FirstPointThinner(voxel, *_union_bounds(inputs))
+    if per_scan_dir is None:
+        targets, groups = [target], [inputs]
+    else:
+        names = per_scan_file_names([s.name for s in scans], suffix)
+        targets, groups = [Path(per_scan_dir) / n for n in names], [[i] for i in inputs]
+    tally = _Tally(total=sum(i.count for i in inputs))
+    with _removed_on_failure(None if per_scan_dir is None else Path(per_scan_dir)):
+        formats = _write_files(
+            suffix, targets, groups, anchor_of(scans), thinner, tally, chunk_points, progress
+        )
+    result = ExportResult(
+        paths=tuple(targets),
+        points_read=tally.read,
+        points_written=sum(tally.written.values()),
+        points_dropped=tally.dropped,
+        points_thinned=tally.thinned,
+        written_per_scan=tuple(tally.written.get(s.index, 0) for s in scans),
+        point_format=formats[0] if per_scan_dir is None else None,
+    )
+    log.info(
+        "exported %d of %d points (%d dropped, %d thinned) to %s",
+        result.points_written,
+        result.points_read,
+        result.points_dropped,
+        result.points_thinned,
+        target if per_scan_dir is None else per_scan_dir,
+    )
+    return result

@@ -1,0 +1,305 @@
+"""The non-LAS readers of :mod:`ndt_cli.io.records`: PLY, PCD, E57 and text files.
+
+Each format has a ``*_summary(path) -> Summary`` (header only) and a
+``*_chunks(path, chunk_points) -> Iterator[Chunk]`` (x, y, z float64 in the file's own
+coordinates plus every attribute, see :mod:`ndt_cli.io.records`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ndt_cli.errors import InputError
+from ndt_cli.io.e57 import split_spec
+from ndt_cli.io.records import Chunk, Dimension, Summary
+
+_PLY_TYPES = {
+    "char": "i1",
+    "int8": "i1",
+    "uchar": "u1",
+    "uint8": "u1",
+    "short": "i2",
+    "int16": "i2",
+    "ushort": "u2",
+    "uint16": "u2",
+    "int": "i4",
+    "int32": "i4",
+    "uint": "u4",
+    "uint32": "u4",
+    "float": "f4",
+    "float32": "f4",
+    "double": "f8",
+    "float64": "f8",
+}
+_XYZ = ("x", "y", "z")
+
+
+def _require_xyz(names: list[str] | tuple[str, ...], path: Path) -> None:
+    if not set(_XYZ) <= set(names):
+        raise InputError(f"no x, y, z fields (found: {', '.join(names) or 'none'})", path)
+
+
+def _slices(n: int, chunk_points: int) -> Iterator[slice]:
+    for start in range(0, n, chunk_points):
+        yield slice(start, min(n, start + chunk_points))
+
+
+# --- PLY -------------------------------------------------------------------------------------
+
+
+def _ply_header(p: Path) -> tuple[int, list[tuple[str, str]]]:
+    """Vertex count and the vertex element's scalar properties (name, numpy type)."""
+    with open(p, "rb") as fh:
+        if fh.readline().strip() != b"ply":
+            raise InputError("not a PLY file (no 'ply' magic line)", p)
+        element, count, props = None, None, []
+        for raw in fh:
+            words = raw.decode("ascii", errors="replace").split()
+            if not words or words[0] in ("comment", "obj_info", "format"):
+                continue
+            if words[0] == "end_header":
+                break
+            if words[0] == "element":
+                element = words[1]
+                if element == "vertex":
+                    count = int(words[2])
+            elif words[0] == "property" and element == "vertex" and words[1] != "list":
+                if words[1] not in _PLY_TYPES:
+                    raise InputError(f"unknown PLY property type {words[1]!r}", p)
+                props.append((words[2], _PLY_TYPES[words[1]]))
+        else:
+            raise InputError("PLY header has no end_header line", p)
+    if count is None:
+        raise InputError("PLY file has no 'vertex' element", p)
+    _require_xyz([name for name, _ in props], p)
+    return count, props
+
+
+def ply_summary(p: Path) -> Summary:
+    count, props = _ply_header(p)
+    dims = tuple(Dimension(n, np.dtype(t)) for n, t in props if n not in _XYZ)
+    return Summary(p, "ply", count, None, dims)
+
+
+def ply_chunks(p: Path, chunk_points: int) -> Iterator[Chunk]:
+    """Binary PLY vertex data is memory-mapped and copied one chunk at a time."""
+    import plyfile
+
+    count, props = _ply_header(p)
+    vertex = plyfile.PlyData.read(str(p), mmap="r")["vertex"].data
+    if len(vertex) != count:
+        raise InputError(f"truncated file: header announces {count} points, found {len(vertex)}", p)
+    for s in _slices(count, chunk_points):
+        part = vertex[s]
+        out = {a: np.asarray(part[a], dtype=np.float64) for a in _XYZ}
+        for name, t in props:
+            if name not in _XYZ:
+                out[name] = np.asarray(part[name], dtype=np.dtype(t))
+        yield out
+
+
+# --- PCD -------------------------------------------------------------------------------------
+
+
+def _pcd_meta(p: Path) -> Any:
+    import pypcd4
+
+    lines = []
+    with open(p, "rb") as fh:
+        for raw in fh:
+            line = raw.decode("utf-8", errors="replace").strip()
+            if line and not line.startswith("#"):
+                lines.append(line)
+            if line.startswith("DATA") or len(lines) > 20:
+                break
+    if (
+        not lines
+        or not lines[-1].startswith("DATA")
+        or not any(x.startswith("FIELDS") for x in lines)
+    ):
+        raise InputError("not a PCD file (no FIELDS/DATA header)", p)
+    meta = pypcd4.MetaData.parse_header(lines)
+    _require_xyz(meta.fields, p)
+    return meta
+
+
+def _pcd_packed_rgb(dtype: np.dtype) -> str | None:
+    """Name of a packed colour field (PCL's float32/uint32 ``rgb`` or ``rgba``), or None."""
+    for name in ("rgb", "rgba"):
+        if name in (dtype.names or ()) and dtype[name].itemsize == 4:
+            return name
+    return None
+
+
+def pcd_summary(p: Path) -> Summary:
+    dtype = _pcd_meta(p).build_dtype()
+    packed = _pcd_packed_rgb(dtype)
+    dims = [Dimension(n, dtype[n]) for n in dtype.names if n not in _XYZ and n != packed]
+    if packed:
+        dims += [Dimension(c, np.dtype(np.uint8)) for c in ("red", "green", "blue")]
+    return Summary(p, "pcd", int(_pcd_meta(p).points), None, tuple(dims))
+
+
+def pcd_chunks(p: Path, chunk_points: int) -> Iterator[Chunk]:
+    import pypcd4
+
+    meta = _pcd_meta(p)
+    data = np.atleast_1d(pypcd4.PointCloud.from_path(p).pc_data)
+    if len(data) != meta.points:
+        raise InputError(
+            f"truncated file: header announces {meta.points} points, found {len(data)}", p
+        )
+    packed = _pcd_packed_rgb(data.dtype)
+    for s in _slices(len(data), chunk_points):
+        part = data[s]
+        out = {a: np.asarray(part[a], dtype=np.float64) for a in _XYZ}
+        for name in data.dtype.names:
+            if name not in _XYZ and name != packed:
+                out[name] = np.ascontiguousarray(part[name])
+        if packed:
+            v = np.ascontiguousarray(part[packed]).view(np.uint32)
+            for shift, c in zip((16, 8, 0), ("red", "green", "blue"), strict=True):
+                out[c] = ((v >> shift) & 255).astype(np.uint8)
+        yield out
+
+
+# --- text ------------------------------------------------------------------------------------
+
+
+def text_summary(p: Path) -> Summary:
+    return Summary(p, "text", None, None, ())
+
+
+def text_chunks(p: Path, chunk_points: int) -> Iterator[Chunk]:
+    from ndt_cli.io.text import TextReader
+
+    xyz = TextReader().read_xyz(p)
+    for s in _slices(len(xyz), chunk_points):
+        yield {a: np.ascontiguousarray(xyz[s, k]) for k, a in enumerate(_XYZ)}
+
+
+# --- E57 -------------------------------------------------------------------------------------
+
+_E57_FIELDS = {  # E57 point field -> (attribute name, buffer type)
+    "intensity": ("intensity", "f4"),
+    "colorRed": ("red", None),
+    "colorGreen": ("green", None),
+    "colorBlue": ("blue", None),
+    "rowIndex": ("row_index", "i4"),
+    "columnIndex": ("column_index", "i4"),
+    "timeStamp": ("time_stamp", "f8"),
+}
+
+
+def _e57_scan(spec: Path) -> tuple[Any, int]:
+    """The open E57 file and the index of the scan ``spec`` names (``FILE.e57#K``)."""
+    try:
+        import pye57
+    except ImportError:
+        raise InputError("reading E57 needs pye57: pip install 'ndt-cli[e57]'", spec) from None
+    path, index = split_spec(spec)
+    e57 = pye57.E57(str(path))
+    count = int(e57.scan_count)
+    if count == 0 or (index is None and count > 1) or (index is not None and index >= count):
+        e57.close()
+        what = f"no scan #{index}" if index is not None else "no single scan: name one as FILE#K"
+        raise InputError(f"{what} (the file holds {count})", spec)
+    return e57, index or 0
+
+
+def _limits(header: Any, node: str, lo: str, hi: str) -> tuple[float, float] | None:
+    if node not in header.scan_fields:
+        return None
+    return float(header[node][lo].value()), float(header[node][hi].value())
+
+
+def _e57_layout(header: Any) -> tuple[list[tuple[str, str, np.dtype]], tuple[float, float] | None]:
+    """(E57 field, attribute name, dtype) of every kept attribute, and the intensity limits."""
+    colours = _limits(header, "colorLimits", "colorRedMinimum", "colorRedMaximum")
+    colour_type = np.dtype("u1" if colours is None or colours[1] <= 255 else "u2")
+    fields = []
+    for field, (name, t) in _E57_FIELDS.items():
+        if field in header.point_fields:
+            fields.append((field, name, np.dtype(t) if t else colour_type))
+    limits = _limits(header, "intensityLimits", "intensityMinimum", "intensityMaximum")
+    return fields, limits
+
+
+def e57_summary(p: Path) -> Summary:
+    e57, k = _e57_scan(p)
+    try:
+        header = e57.get_header(k)
+        fields, limits = _e57_layout(header)
+        pose = None
+        if header.has_pose():
+            pose = np.eye(4)
+            pose[:3, :3] = np.asarray(header.rotation_matrix, dtype=np.float64)
+            pose[:3, 3] = np.asarray(header.translation, dtype=np.float64)
+        dims = tuple(Dimension(name, t) for _, name, t in fields)
+        return Summary(
+            p, "e57", int(header.point_count), None, dims, intensity_limits=limits, pose=pose
+        )
+    finally:
+        e57.close()
+
+
+def _coordinate_fields(header: Any, p: Path) -> tuple[list[str], str]:
+    fields = header.point_fields
+    for names, state in (
+        (["cartesianX", "cartesianY", "cartesianZ"], "cartesianInvalidState"),
+        (["sphericalRange", "sphericalAzimuth", "sphericalElevation"], "sphericalInvalidState"),
+    ):
+        if set(names) <= set(fields):
+            return names + ([state] if state in fields else []), state
+    raise InputError("the scan has neither cartesian nor spherical coordinates", p)
+
+
+def _e57_chunk(
+    arrays: dict[str, np.ndarray], n: int, fields: list[tuple[str, str, np.dtype]]
+) -> Chunk:
+    """One chunk of the first ``n`` buffered records: cartesian x, y, z and the attributes."""
+    if "cartesianX" in arrays:
+        xyz = [arrays[f"cartesian{a}"][:n].copy() for a in "XYZ"]
+    else:
+        r, az, el = (arrays[f"spherical{a}"][:n] for a in ("Range", "Azimuth", "Elevation"))
+        xyz = [r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)]
+    out = dict(zip(_XYZ, xyz, strict=True))
+    for field, name, _ in fields:
+        out[name] = arrays[field][:n].copy()
+    state = next((arrays[s][:n] for s in arrays if s.endswith("InvalidState")), None)
+    if state is not None and state.any():
+        keep = state == 0
+        out = {k: v[keep] for k, v in out.items()}
+    return out
+
+
+def e57_chunks(p: Path, chunk_points: int) -> Iterator[Chunk]:
+    """Streams a scan through libE57 buffers of ``chunk_points`` records (pose not applied)."""
+    from pye57 import libe57
+
+    e57, k = _e57_scan(p)
+    try:
+        header = e57.get_header(k)
+        fields, _ = _e57_layout(header)
+        coords, _ = _coordinate_fields(header, p)
+        cap = int(min(chunk_points, max(1, header.point_count)))
+        arrays: dict[str, np.ndarray] = {}
+        buffers = libe57.VectorSourceDestBuffer()
+        for name in coords:
+            arrays[name] = np.empty(cap, np.int8 if name.endswith("State") else np.float64)
+        for field, _, t in fields:
+            arrays[field] = np.empty(cap, t)
+        for name, arr in arrays.items():
+            buffers.append(libe57.SourceDestBuffer(e57.image_file, name, arr, cap, True, True))
+        reader = header.points.reader(buffers)
+        try:
+            while n := reader.read():
+                yield _e57_chunk(arrays, n, fields)
+        finally:
+            reader.close()
+    finally:
+        e57.close()
