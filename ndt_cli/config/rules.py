@@ -39,6 +39,11 @@ RANGES: dict[str, tuple[float | None, float | None]] = {
     "search.translation_step": (0.1, 1000.0),
     "search.points_per_slice": (10, 1_000_000),
     "search.keep_candidates": (2, 64),
+    "search.bnb_resolution": (0.1, 10.0),
+    "search.bnb_window": (1.0, 500.0),
+    "search.bnb_candidates": (2, 64),
+    "search.bnb_start_cell": (0.5, 100.0),
+    "search.fallback_ratio": (0.5, 1.0),
     "refine.voxel": (0.01, 5.0),
     "refine.max_distance": (0.01, 50.0),
     "refine.min_distance": (0.001, 50.0),
@@ -102,6 +107,8 @@ def _relations(c: Any) -> None:
     if c.refine.min_distance > c.refine.max_distance:
         raise ConfigError("'refine.min_distance' must not exceed 'refine.max_distance'")
     s = c.search
+    if s.bnb_window / s.bnb_resolution > 2000:
+        raise ConfigError("'search.bnb_window' over 'search.bnb_resolution' must be <= 2000")
     n = int(s.translation_range / s.translation_step + 1e-9)
     starts = s.yaw_starts * ((2 * n + 1) ** 2 + 1)
     if starts > MAX_STARTS:

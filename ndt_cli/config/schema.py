@@ -129,18 +129,41 @@ class OptimizerConfig:
     max_rotation_step_deg: float = key(15.0, "largest rotation step (degrees)")
 
 
+SearchMethod = Literal["bnb", "starts"]
+
+
 @dataclass(frozen=True)
 class SearchConfig:
-    """The start search at the coarsest cell size (no initial guess needed)."""
+    """Where the coarse-to-fine refinement starts when there is no initial guess."""
 
-    yaw_starts: int = key(12, "start headings over 360 degrees")
-    translation_range: float = key(
-        40.0, "translation starts cover +-this around the aligned slice centroids (m)"
+    method: SearchMethod = key(
+        "bnb",
+        "bnb: exact global search, branch and bound over (x, y, yaw) on a likelihood field of "
+        "the target slices, then refinement from 5 m cells; starts: Newton from a grid of "
+        "starts at the coarsest cell size (slower; kept for comparison)",
     )
-    translation_step: float = key(10.0, "spacing of the translation starts (m)")
-    points_per_slice: int = key(1000, "moving points per slice during the search")
+    bnb_resolution: float = key(1.0, "bnb: pixel of the likelihood field and of the search (m)")
+    bnb_window: float = key(
+        50.0, "bnb: translations searched, +-this around the aligned scene centres (m)"
+    )
+    bnb_candidates: int = key(8, "bnb: best distinct poses refined by NDT")
+    bnb_start_cell: float = key(
+        5.0, "bnb: the refinement starts at the configured cells up to this size (m)"
+    )
+    fallback_ratio: float = key(
+        0.95,
+        "bnb: when the second distinct pose scores at least this share of the best (an "
+        "ambiguous scene, or scans far apart), the start search runs too and its candidates "
+        "join; on simulated links this kept far links as reliable as the start search alone",
+    )
+    yaw_starts: int = key(12, "starts: headings over 360 degrees")
+    translation_range: float = key(
+        40.0, "starts: translations cover +-this around the aligned slice centroids (m)"
+    )
+    translation_step: float = key(10.0, "starts: spacing of the translation starts (m)")
+    points_per_slice: int = key(1000, "starts: moving points per slice during the search")
     keep_candidates: int = key(
-        8, "distinct coarse solutions refined to the finest cell size (at least 2)"
+        8, "starts: distinct coarse solutions refined to the finest cell size (at least 2)"
     )
     refine_offsets: bool = key(
         True, "restart each finer level from offsets of +-1/2 and +-1 cell in x and y too"

@@ -12,7 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ndt_cli.ndt import kernels, passes
+from ndt_cli.ndt import bnb_kernels, kernels, passes
+from ndt_cli.ndt.bnb_kernels import SearchKernels
 from ndt_cli.ndt.grid import NDTMap
 from ndt_cli.ndt.kernels import SourcePoints
 
@@ -26,16 +27,25 @@ class Kernels:
     point_scores: Callable[[NDTMap, SourcePoints, np.ndarray], tuple[np.ndarray, np.ndarray]]
     bounds: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
     slice_pass: Callable[..., tuple]
+    search: SearchKernels  # the branch and bound of the global search
 
     def __repr__(self) -> str:
         return f"Kernels({self.name})"
 
 
-NUMBA = Kernels("numba", kernels.accumulate, kernels.point_scores, passes.bounds, passes.slice_pass)
+NUMBA = Kernels(
+    "numba",
+    kernels.accumulate,
+    kernels.point_scores,
+    passes.bounds,
+    passes.slice_pass,
+    bnb_kernels.NUMBA,
+)
 NUMPY = Kernels(
     "numpy",
     kernels.accumulate_numpy,
     kernels.point_scores_numpy,
     passes.bounds_numpy,
     passes.slice_pass_numpy,
+    bnb_kernels.NUMPY,
 )

@@ -80,17 +80,19 @@ def coarse_to_fine(
     maps: TargetMaps,
     sampler: SourceSampler,
     optimizer: OptimizerConfig,
-    restarts: bool,
+    restarts: bool | Sequence[bool],
     kernels: Kernels,
 ) -> Refined:
-    """Refine every candidate pose through the cell sizes of ``schedule`` (coarse to fine)."""
+    """Refine every candidate pose through the cell sizes of ``schedule`` (coarse to fine);
+    ``restarts``: restart from the offsets at every level, or per level."""
     cands = candidates
     scores, evidence = np.zeros(len(cands)), np.zeros(len(cands))
     levels: list[LevelStats] = []
     converged = False
+    per_level = [restarts] * len(schedule) if isinstance(restarts, bool) else list(restarts)
     for k, cell in enumerate(schedule):
         t0 = time.perf_counter()
-        off = restart_offsets(cell, restarts)
+        off = restart_offsets(cell, per_level[k])
         starts = (cands[:, None, :] + off[None, :, :]).reshape(-1, 3)
         pts = sampler.at(cell)
         res = run_level(maps(cell), pts, starts, optimizer, kernels)

@@ -156,7 +156,7 @@ def optimize(
         score=best,
         iterations=iters,
         converged=converged,
-        trace=np.array(trace).reshape(-1, n),
+        trace=np.array(trace).reshape(len(trace), n),
         evaluations=evaluations,
-        path=np.array(path).reshape(-1, n, 4),
+        path=np.array(path).reshape(len(path), n, 4),
     )

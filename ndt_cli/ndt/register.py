@@ -32,7 +32,18 @@ from ndt_cli.ndt.prepare import PreparedScan, load_and_prepare
 from ndt_cli.ndt.quality import Fit, Verdict, judge, measure_fit
 from ndt_cli.ndt.refine import Refinement, refine_pose
 from ndt_cli.ndt.result import LevelStats, RegistrationResult
-from ndt_cli.ndt.search import start_search
+from ndt_cli.ndt.search import global_start, start_search
+
+
+@dataclass(frozen=True)
+class _Start:
+    """Candidate poses (reduced frames), the search's level records, the refinement schedule
+    and whether each of its levels restarts from the offsets."""
+
+    candidates: np.ndarray
+    levels: list[LevelStats]
+    schedule: tuple[float, ...]
+    restarts: tuple[bool, ...]
 
 
 def _starts(
@@ -44,22 +55,47 @@ def _starts(
     init: np.ndarray | None,
     guess: np.ndarray | None,
     kernels: Kernels,
-) -> tuple[np.ndarray, list[LevelStats], tuple[float, ...]]:
-    """Candidate poses (reduced frames), the search's level record and the refinement schedule.
-
-    ``init`` replaces the search: it is the only candidate. ``guess`` is one more candidate
-    beside the search's: it wins only if it fits better, so a wrong guess cannot be accepted
-    where the search alone would not accept it."""
-    cells = cfg.grid.cell_sizes
+) -> _Start:
+    """Where the refinement starts. ``init`` replaces the search: it is the only candidate.
+    ``guess`` is one more candidate beside the search's: it wins only if it fits better, so a
+    wrong guess cannot be accepted where the search alone would not accept it."""
+    cells, s = cfg.grid.cell_sizes, cfg.search
     if init is not None:
-        return _planar(target, source, np.asarray(init, float))[None], [], cells
-    found = start_search(
-        target, source, maps, sampler, cells[0], cfg.search, cfg.optimizer, kernels
-    )
-    candidates = found.candidates
+        flags = (s.refine_offsets,) * len(cells)
+        return _Start(_planar(target, source, np.asarray(init, float))[None], [], cells, flags)
+    start = _search(target, source, maps, sampler, cfg, kernels)
     if guess is not None:
-        candidates = np.vstack([candidates, _planar(target, source, np.asarray(guess, float))])
-    return candidates, [found.level], cells[1:] if len(cells) > 1 else cells
+        extra = _planar(target, source, np.asarray(guess, float))
+        start = replace(start, candidates=np.vstack([start.candidates, extra]))
+    return start
+
+
+def _search(
+    target: PreparedScan,
+    source: PreparedScan,
+    maps: TargetMaps,
+    sampler: SourceSampler,
+    cfg: Config,
+    kernels: Kernels,
+) -> _Start:
+    """The configured search: the global one (refined from ``bnb_start_cell`` m, restarts at
+    that level only), falling back to the start grid too when it is ambiguous or finds no
+    overlap at all; or the grid."""
+    cells, s = cfg.grid.cell_sizes, cfg.search
+    stages, candidates = [], []
+    if s.method == "bnb":
+        found = global_start(target, source, s, kernels)
+        stages.append(found.level)
+        candidates.append(found.candidates)
+        if len(found.candidates) and found.ratio < s.fallback_ratio:
+            schedule = tuple(c for c in cells if c <= s.bnb_start_cell) or (min(cells),)
+            flags = (s.refine_offsets,) + (False,) * (len(schedule) - 1)
+            return _Start(found.candidates, stages, schedule, flags)
+    grid = start_search(target, source, maps, sampler, cells[0], s, cfg.optimizer, kernels)
+    stages.append(grid.level)
+    candidates.append(grid.candidates)
+    schedule = cells[1:] if len(cells) > 1 else cells
+    return _Start(np.vstack(candidates), stages, schedule, (s.refine_offsets,) * len(schedule))
 
 
 def _planar(target: PreparedScan, source: PreparedScan, T: np.ndarray) -> np.ndarray:
@@ -113,10 +149,11 @@ def register_prepared(
     t_start = time.perf_counter()
     maps = TargetMaps(target.slices, cfg.grid)
     sampler = SourceSampler(source.slices, cfg.source)
-    candidates, levels, schedule = _starts(target, source, maps, sampler, cfg, init, guess, kernels)
-    schedule = with_verification(schedule)
+    start = _starts(target, source, maps, sampler, cfg, init, guess, kernels)
+    schedule = with_verification(start.schedule)
+    restarts = start.restarts + (start.restarts[-1],) * (len(schedule) - len(start.restarts))
     refined = coarse_to_fine(
-        candidates, schedule, maps, sampler, cfg.optimizer, cfg.search.refine_offsets, kernels
+        start.candidates, schedule, maps, sampler, cfg.optimizer, restarts, kernels
     )
     ranked = rank(refined, schedule[-1])
     gate_map, gate_points = gate_inputs(
@@ -131,7 +168,13 @@ def register_prepared(
     verdict = judge(fit, refined.converged, refinement, target.level, cfg.quality, after)
     per_slice = tuple(int(n) for n in sampler.fine.per_slice(len(source.slices)))
     stages = _Stages(
-        (*levels, *refined.levels), refined.converged, ranked, fit, refinement, verdict, per_slice
+        (*start.levels, *refined.levels),
+        refined.converged,
+        ranked,
+        fit,
+        refinement,
+        verdict,
+        per_slice,
     )
     timings = {
         "grid_s": maps.build_s,

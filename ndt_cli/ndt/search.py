@@ -1,5 +1,10 @@
 """The start search: where the coarse-to-fine refinement begins when there is no initial guess.
 
+``search.method: bnb`` (:func:`global_start`): the exact global search of
+:mod:`ndt_cli.ndt.bnb` over every heading and every translation of a window on a likelihood
+field of the target slices; its best distinct poses are the candidates, and the refinement
+starts at 5 m cells. ``search.method: starts`` (:func:`start_search`, below):
+
 At the coarsest cell size the solver starts from ``search.yaw_starts`` headings times a grid of
 translations around the pose that puts the source's slice centroid onto the target's, plus the
 paper's zero translation at every heading, all in one batch. The ``search.keep_candidates``
@@ -20,6 +25,7 @@ import numpy as np
 from ndt_cli.config.schema import OptimizerConfig, SearchConfig
 from ndt_cli.core.transforms import pose2d_matrix, wrap_angle, yaw_of
 from ndt_cli.ndt.backend import Kernels
+from ndt_cli.ndt.bnb import global_search
 from ndt_cli.ndt.levels import SourceSampler, TargetMaps, level_stats, run_level
 from ndt_cli.ndt.prepare import PreparedScan
 from ndt_cli.ndt.result import LevelStats
@@ -70,10 +76,37 @@ def distinct_indices(params: np.ndarray, scores: np.ndarray, k: int, cell: float
 
 @dataclass(frozen=True)
 class StartSearch:
-    """Distinct candidate poses (K,3) in the reduced frames, and the record of the level."""
+    """Distinct candidate poses (K,3) in the reduced frames, the record of the level, and (bnb)
+    the second distinct pose's score over the best's."""
 
     candidates: np.ndarray
     level: LevelStats
+    ratio: float = float("nan")
+
+
+def global_start(
+    target: PreparedScan, source: PreparedScan, search: SearchConfig, kernels: Kernels
+) -> StartSearch:
+    """The best distinct poses of the exact global search (:mod:`ndt_cli.ndt.bnb`)."""
+    found = global_search(
+        target.slices,
+        source.slices,
+        resolution=search.bnb_resolution,
+        window=search.bnb_window,
+        candidates=search.bnb_candidates,
+        kernels=kernels.search,
+    )
+    best = float(found.scores[0]) if len(found.scores) else 0.0
+    level = LevelStats(
+        search.bnb_resolution,
+        found.nodes,
+        0,
+        best,
+        best / max(found.n_points, 1),
+        True,
+        found.time_s,
+    )
+    return StartSearch(found.poses, level, float(found.ratio))
 
 
 def start_search(
