@@ -22,8 +22,9 @@ from ndt_cli.ndt.refine import icp, refine_pose
 from ndt_cli.ndt.register import register
 from ndt_cli.ndt.result import Status
 from ndt_cli.ndt.search import distinct_indices
-from ndt_cli.pipeline.chain import compose_poses
 from ndt_cli.pipeline.links import Link
+from ndt_cli.pipeline.network import LinkKind
+from ndt_cli.pipeline.solution import chained
 
 
 def _plane(rng, origin, u, v, size, n):
@@ -151,13 +152,17 @@ def test_weakest_direction_of_the_ndt_hessian():
     assert weakest_direction(-np.eye(3))[1] == 0.0  # no curvature at all
 
 
-def _link(k, i, j, T):
+def _link(k, i, j, T, status=Status.OK):
     from ndt_cli.ndt.result import RegistrationResult
 
     if T is None:
         return Link(k, i, j, failure="unreadable")
-    r = RegistrationResult(T, Status.OK, True, 1.0, 1.0, 1.0, (), (), (), np.eye(3), 0, 0, 0)
+    r = RegistrationResult(T, status, True, 1.0, 1.0, 1.0, (), (), (), np.eye(3), 0, 0, 0)
     return Link(k, i, j, result=r)
+
+
+def compose_poses(n, links, anchor):
+    return chained(n, links, anchor, {LinkKind.ADJACENT})
 
 
 def test_compose_poses_forward_and_backward_from_the_anchor():
@@ -171,11 +176,13 @@ def test_compose_poses_forward_and_backward_from_the_anchor():
     np.testing.assert_allclose(poses[0], np.linalg.inv(rel[0] @ rel[1]))
 
 
-def test_compose_poses_stops_at_a_failed_link():
-    rel = [_rigid([0, 0, 5.0], [2.0, 0, 0]) for _ in range(3)]
+def test_compose_poses_stops_at_a_failed_or_suspect_link():
+    rel = [_rigid([0, 0, 5.0], [2.0, 0, 0]) for _ in range(4)]
     links = [_link(0, 0, 1, rel[0]), _link(1, 1, 2, None), _link(2, 2, 3, rel[2])]
     poses = compose_poses(4, links, anchor=0)
     assert poses[1] is not None and poses[2] is None and poses[3] is None
+    links = [_link(0, 0, 1, rel[0]), _link(1, 1, 2, rel[1], Status.SUSPECT)]
+    assert compose_poses(3, links, anchor=0)[2] is None  # no pose through a link not ok
 
 
 @pytest.fixture(scope="module")
@@ -213,3 +220,21 @@ def test_a_whole_registration_on_the_numpy_twins_matches_the_numba_path(small_pa
     assert rot < 0.001 and trans < 0.001, (rot, trans)  # sums in another order: sub-millimetre
     truth = np.linalg.inv(poses[0]) @ poses[1]
     assert transform_errors(fast.T_target_source, truth)[1] < 0.02  # and both are right
+
+
+def test_a_worker_prepares_each_scan_once_for_all_its_links(tmp_path):
+    import os
+
+    from ndt_cli import io, sim
+    from ndt_cli.pipeline import tasks
+
+    _, scans, _ = sim.make_sequence(seed=3, n_scans=1, scan_kwargs={"n_azimuth": 300})
+    f = tmp_path / "s.laz"
+    io.write(f, scans[0])
+    cfg = Config()
+    first = tasks.prepare_scan(f, cfg)
+    assert tasks.prepare_scan(f, cfg) is first  # the second link reuses it
+    assert tasks.prepare_scan(f, cfg.replace(slices={"thickness": 0.3})) is not first
+    os.utime(f, ns=(1, 1))  # the file changed: prepared again
+    assert tasks.prepare_scan(f, cfg) is not first
+    assert "file not found" in tasks.prepare_scan(tmp_path / "none.laz", cfg)

@@ -6,6 +6,7 @@ reason (a ``str``), a link that cannot be registered a failed :class:`Link`.
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -13,6 +14,7 @@ import numpy as np
 
 from ndt_cli.config.schema import Config
 from ndt_cli.errors import NdtError
+from ndt_cli.io.e57 import split_spec
 from ndt_cli.ndt.prepare import PreparedScan, load_and_prepare
 from ndt_cli.ndt.register import register_prepared
 from ndt_cli.pipeline.links import Link
@@ -39,12 +41,36 @@ class LinkJob:
         return replace(link, index=self.index, kind=self.kind)
 
 
-def prepare_scan(path: Path, cfg: Config) -> PreparedScan | str:
-    """The prepared scan, or the one-line reason why it cannot be used."""
+CACHED_SCANS = 6  # prepared scans a worker process keeps for its next links
+_prepared: OrderedDict[tuple, PreparedScan] = OrderedDict()
+
+
+def _cache_key(path: Path, cfg: Config) -> tuple | None:
+    """A scan's identity for the cache: its name, file time and size, and the config."""
     try:
-        return load_and_prepare(path, cfg)
+        st = split_spec(path)[0].stat()
+    except OSError:
+        return None
+    return str(path), st.st_mtime_ns, st.st_size, cfg
+
+
+def prepare_scan(path: Path, cfg: Config) -> PreparedScan | str:
+    """The prepared scan, or the one-line reason why it cannot be used. A worker process keeps
+    its last prepared scans: in a network every scan is in several links, and a worker that
+    reads its scans itself (Dask) prepares each at most once for them."""
+    key = _cache_key(path, cfg)
+    if key is not None and key in _prepared:
+        _prepared.move_to_end(key)
+        return _prepared[key]
+    try:
+        scan = load_and_prepare(path, cfg)
     except NdtError as exc:
         return str(exc)
+    if key is not None:
+        _prepared[key] = scan
+        while len(_prepared) > CACHED_SCANS:
+            _prepared.popitem(last=False)
+    return scan
 
 
 def scan_problem(path: Path, cfg: Config) -> str | None:
