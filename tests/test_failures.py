@@ -135,12 +135,13 @@ def _kill_during(where: str, out: Path, tmp: Path) -> None:
     code = (
         "import time, sys\n"
         "from ndt_cli.io import outdir\n"
+        "MARK = sys.argv[-1] + '.ready'\n"
         f"real = outdir.{where}\n"
         "def stalled(*a, **k):\n"
-        "    open(sys.argv[-1] + '.ready', 'w').close(); time.sleep(60); return real(*a, **k)\n"
+        "    open(MARK, 'w').close(); time.sleep(60); return real(*a, **k)\n"
         f"outdir.{where} = stalled\n"
         "from ndt_cli.cli import register_app\n"
-        "sys.argv = sys.argv[:-1]\n"
+        "sys.argv = sys.argv[1:-1]  # program name first, marker last\n"
         "register_app()\n"
     )
     args = [str(SAMPLE / "scan_02.laz"), str(SAMPLE / "scan_03.laz"), "-o", str(out), "-q"]
@@ -148,11 +149,13 @@ def _kill_during(where: str, out: Path, tmp: Path) -> None:
     proc = subprocess.Popen(
         [sys.executable, "-c", code, "ndt-register", *args, str(marker)], env=ENV, cwd=tmp
     )
+    ready = Path(str(marker) + ".ready")
     deadline = time.monotonic() + 120
-    while not Path(str(marker) + ".ready").exists() and time.monotonic() < deadline:
+    while not ready.exists() and time.monotonic() < deadline and proc.poll() is None:
         time.sleep(0.05)
     proc.send_signal(signal.SIGKILL)
     proc.wait()
+    assert ready.exists(), f"the run never reached {where}"
 
 
 @pytest.mark.slow
