@@ -49,6 +49,9 @@ VerboseOpt = Annotated[
 ]
 DebugOpt = Annotated[bool, typer.Option("--debug", help="Show tracebacks of errors.")]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print the result as JSON on stdout.")]
+ResultDirArg = Annotated[
+    Path | None, typer.Argument(help="Output folder of ndt-chain or ndt-register.")
+]
 
 PROGRESS = "ndt_cli.progress"  # lines shown as the work goes on (not held back)
 _log = logging.getLogger("ndt_cli")

@@ -12,6 +12,7 @@ from ndt_cli.cli.common import (
     JsonOpt,
     OneLineCommand,
     QuietOpt,
+    ResultDirArg,
     VersionOpt,
     check_out,
     console,
@@ -37,9 +38,7 @@ _HELP = "\n\n".join(
 
 @eval_app.command(help=_HELP, cls=OneLineCommand)
 def evaluate_cmd(
-    result_dir: Annotated[
-        Path | None, typer.Argument(help="Output folder of ndt-chain or ndt-register.")
-    ] = None,
+    result_dir: ResultDirArg = None,
     gt: Annotated[
         Path | None,
         typer.Option(

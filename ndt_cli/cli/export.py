@@ -15,6 +15,7 @@ from ndt_cli.cli.common import (
     JsonOpt,
     OneLineCommand,
     QuietOpt,
+    ResultDirArg,
     VersionOpt,
     new_app,
     setup_logging,
@@ -49,9 +50,7 @@ _HELP = "\n\n".join(
 
 @export_app.command(help=_HELP, cls=OneLineCommand)
 def export_cmd(
-    result_dir: Annotated[
-        Path | None, typer.Argument(help="Output folder of ndt-chain or ndt-register.")
-    ] = None,
+    result_dir: ResultDirArg = None,
     out: Annotated[
         Path | None, typer.Option("--out", "-o", help="The merged file: .las, .laz, .ply, .e57.")
     ] = None,

@@ -113,7 +113,7 @@ def check_readable(path: str | Path) -> None:
     """Raise the file's one-line :class:`InputError` now if it cannot be opened as a point
     file (missing, unreadable, unknown format, empty, a broken header), before any heavy work."""
     p, reader = _open(path)
-    with _file_errors(p):
+    with file_errors(p):
         reader.check(p)
 
 
@@ -124,7 +124,7 @@ def one_line(exc: BaseException, limit: int = 160) -> str:
 
 
 @contextmanager
-def _file_errors(p: Path) -> Iterator[None]:
+def file_errors(p: Path) -> Iterator[None]:
     """Turn any library failure while reading ``p`` into a one-line :class:`InputError`."""
     try:
         yield
@@ -139,7 +139,7 @@ def _file_errors(p: Path) -> Iterator[None]:
 def count(path: str | Path) -> int | None:
     """Points a file announces in its header (LAS/LAZ), or None for formats without a count."""
     p, reader = _open(path)
-    with _file_errors(p):
+    with file_errors(p):
         return reader.count(p)
 
 
@@ -149,7 +149,7 @@ def read_chunks(path: str | Path, chunk_size: int | None = None) -> Iterator[np.
     Non-finite and (0,0,0) points are dropped; errors as in :func:`read`."""
     p, reader = _open(path)
     n_read = n_kept = 0
-    with _file_errors(p):
+    with file_errors(p):
         for raw in reader.iter_xyz(p, chunk_size):
             nonfinite, zero = unusable(raw)
             keep = ~(nonfinite | zero)
@@ -169,7 +169,7 @@ def read(path: str | Path) -> PointCloud:
     Raises :class:`InputError` (one line, naming the file) for anything wrong with the file.
     """
     p, reader = _open(path)
-    with _file_errors(p):
+    with file_errors(p):
         raw = np.asarray(reader.read_xyz(p), dtype=np.float64).reshape(-1, 3)
     n_read = len(raw)
     if n_read == 0:

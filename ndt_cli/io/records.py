@@ -23,7 +23,6 @@ turned cartesian; text files x, y, z only. No point is dropped here otherwise.
 
 from __future__ import annotations
 
-import contextlib
 import struct
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -32,9 +31,9 @@ from pathlib import Path
 import laspy
 import numpy as np
 
-from ndt_cli.errors import InputError, NdtError
+from ndt_cli.errors import InputError
 from ndt_cli.io.e57 import split_spec
-from ndt_cli.io.points import one_line
+from ndt_cli.io.points import file_errors
 
 CHUNK_POINTS = 1_000_000
 """Default points per chunk (about 100 MB of records and coordinates for LAS format 7)."""
@@ -153,19 +152,6 @@ def _checked(path: str | Path) -> tuple[Path, str]:
     return p, fmt
 
 
-@contextlib.contextmanager
-def _errors(p: Path) -> Iterator[None]:
-    """Any library failure while reading ``p`` becomes a one-line :class:`InputError`."""
-    try:
-        yield
-    except NdtError:
-        raise
-    except OSError as exc:
-        raise InputError(f"cannot read ({exc.strerror or one_line(exc)})", p) from exc
-    except Exception as exc:  # any library failure is a problem with the file
-        raise InputError(f"not a valid or complete {p.suffix} file: {one_line(exc)}", p) from exc
-
-
 def summary(path: str | Path) -> Summary:
     """Header summary of a point file (see :class:`Summary`); InputError if unreadable."""
     from ndt_cli.io import records_formats as other
@@ -173,7 +159,7 @@ def summary(path: str | Path) -> Summary:
     p, fmt = _checked(path)
     readers = {"las": _las_summary, "laz": _las_summary, "ply": other.ply_summary}
     readers |= {"pcd": other.pcd_summary, "e57": other.e57_summary, "text": other.text_summary}
-    with _errors(p):
+    with file_errors(p):
         return readers[fmt](p)
 
 
@@ -185,7 +171,7 @@ def iter_records(path: str | Path, chunk_points: int = CHUNK_POINTS) -> Iterator
     p, fmt = _checked(path)
     readers = {"las": _las_chunks, "laz": _las_chunks, "ply": other.ply_chunks}
     readers |= {"pcd": other.pcd_chunks, "e57": other.e57_chunks, "text": other.text_chunks}
-    with _errors(p):
+    with file_errors(p):
         yield from readers[fmt](p, max(1, int(chunk_points)))
 
 
