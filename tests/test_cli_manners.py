@@ -68,9 +68,21 @@ def test_help_shows_the_defaults():
     assert "[default: ndt_chain]" in text and "[default: local]" in text
 
 
-def test_the_shell_completion_script_is_available():
-    res = runner.invoke(register_app, ["--show-completion", "bash"], prog_name="ndt-register")
-    assert res.exit_code == 0 and "complete" in res.stdout and "ndt" in res.stdout
+COMPLETE_IN_BASH = """
+eval "$(ndt-register --show-completion)"
+COMP_WORDS=(ndt-register --ou); COMP_CWORD=1
+_ndt_register_completion ndt-register
+echo "${COMPREPLY[@]}"
+"""
+
+
+def test_the_shell_completion_script_completes_options_in_bash():
+    # --show-completion detects the calling shell: run it from a real bash, source the script
+    # and ask it to complete "--ou" as bash would on a Tab
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}"}
+    res = subprocess.run(["bash", "-c", COMPLETE_IN_BASH], capture_output=True, text=True, env=env)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.split() == ["--out"], res.stdout
 
 
 @pytest.mark.parametrize("name", ["ndt-register", "ndt-chain"])
