@@ -10,7 +10,6 @@ from pathlib import Path
 import laspy
 import numpy as np
 import plyfile
-import pypcd4
 
 from ndt_cli.errors import OutputError
 from ndt_cli.io.atomic import atomic_path
@@ -50,6 +49,8 @@ def _write_las(path: Path, points: np.ndarray, offsets: np.ndarray, compress: bo
 
 
 def _write_pcd(path: Path, points: np.ndarray) -> None:
+    import pypcd4  # here: only PCD needs it, and it is slow to import
+
     cloud = pypcd4.PointCloud.from_points(points, ("x", "y", "z"), (np.float64,) * 3)
     cloud.save(path, encoding=pypcd4.Encoding.BINARY)
 
