@@ -93,6 +93,7 @@ def test_optimizer_traces_cover_each_method_and_end_near_the_truth(pair):
         assert best > start_score
 
 
+@pytest.mark.slow
 def test_cli_writes_csv_with_units_and_png(pair, tmp_path):
     _, _, scans, truth = pair
     io.write(tmp_path / "a.laz", scans[0])

@@ -165,6 +165,7 @@ def test_a_street_that_comes_back_to_its_start_closes_the_loop(tmp_path):
     assert adjusted[1] < TRANS and adjusted[0] < ROT
 
 
+@pytest.mark.slow
 def test_no_adjust_with_one_neighbour_is_the_classic_chain(street8, tmp_path):
     files, _ = street8
     net = NetworkOptions(neighbours=1, adjust=False)

@@ -69,6 +69,7 @@ def max_displacement(T: np.ndarray, T_ref: np.ndarray, points: np.ndarray) -> fl
     return float(np.max(np.hypot(*(apply(T, points) - apply(T_ref, points))[:, :2].T)))
 
 
+@pytest.mark.slow
 def test_georeferenced_coordinates_register_as_accurately_as_local_ones(street):
     scans, poses = street
     ref = relative(poses, 0, 1)
@@ -114,6 +115,7 @@ def test_identical_scans_give_identity(street):
     assert rot < 0.01 and trans < 0.01
 
 
+@pytest.mark.slow
 def test_same_input_gives_bit_identical_result(street):
     scans, _ = street
     a = ndt_cli.register(scans[0], scans[1])
@@ -130,6 +132,7 @@ def test_real_velodyne_pair_matches_reference():
     assert rot < 1.0 and trans < 0.05, (rot, trans)
 
 
+@pytest.mark.slow
 def test_two_different_streets_are_suspect_not_ok(street):
     scans, _ = street
     _, other, _ = sim.make_sequence(seed=77, n_scans=1)
@@ -153,6 +156,7 @@ def test_search_includes_the_papers_zero_start_in_the_scan_frames(street):
     assert np.min(np.abs(starts - zero).sum(axis=1)) < 1e-9
 
 
+@pytest.mark.slow
 def test_corridor_is_flagged_degenerate_along_the_street_axis():
     _, scans, poses = sim.make_sequence(seed=3, n_scans=2, corridor=True)
     result = ndt_cli.register(scans[0], scans[1])

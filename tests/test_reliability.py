@@ -146,6 +146,7 @@ def test_a_line_of_points_is_degenerate_not_good(scans, tmp_path):
     assert res.exit_code == 1 and re.search(r"registration (degenerate|suspect)", res.stderr)
 
 
+@pytest.mark.slow
 def test_nan_rows_are_dropped_and_the_rest_registers(scans, tmp_path):
     pts, poses = scans
     noisy = np.vstack([pts[0], np.full((50, 3), np.nan), np.zeros((30, 3))])
@@ -159,6 +160,7 @@ def test_nan_rows_are_dropped_and_the_rest_registers(scans, tmp_path):
     assert rot < 0.3 and trans < 0.15
 
 
+@pytest.mark.slow
 def test_identical_scans_and_a_scan_10_km_away(scans, tmp_path):
     pts, _ = scans
     a = _points(tmp_path / "a.laz", pts[0])
@@ -172,6 +174,7 @@ def test_identical_scans_and_a_scan_10_km_away(scans, tmp_path):
         assert np.abs(mapped - pts[0]).max() < 0.01  # every point back in place within 1 cm
 
 
+@pytest.mark.slow
 def test_two_different_streets_are_never_reported_as_good(scans, tmp_path):
     _, other, _ = sim.make_sequence(seed=77, n_scans=1, scan_kwargs={"n_azimuth": 1000})
     a = _points(tmp_path / "a.laz", scans[0][0])

@@ -133,6 +133,7 @@ def test_occluder_casts_a_shadow_on_the_wall_behind_it():
     assert (np.abs(seen[:, 0] - 5.0) < 1e-6).sum() > 50  # the post's front face is seen instead
 
 
+@pytest.mark.slow
 def test_tilted_scan_points_lie_on_the_scene_surfaces(street):
     eps = 1e-6
     tilted = sim.scanner_pose(8.0, 1.0, -30.0, roll_deg=3.0, pitch_deg=-2.0)
