@@ -1,6 +1,7 @@
 """Benchmark data, made once and cached in ``benchmarks/.cache``: simulated street scans at full
-terrestrial density (~2 M points each, LAS) and large files tiled from them for the scaling
-curve. The cache key includes the simulator's source, so a changed simulator remakes the data.
+terrestrial density (~2 M points each, LAS), the same street scanned with a tenth of the rays
+(~0.2 M points each) and large files tiled from the full scans for the scaling curve. The cache
+key includes the simulator's source, so a changed simulator remakes the data.
 """
 
 from __future__ import annotations
@@ -13,29 +14,41 @@ import numpy as np
 
 from ndt_cli import io, sim
 from ndt_cli.io.matrices import format_matrix
+from ndt_cli.io.writers import LAS_SCALE
 
 ROOT = Path(__file__).resolve().parents[1]
 CACHE = ROOT / "benchmarks" / ".cache"
 N_SCANS = 6
 SEED = 7
 RAYS = {"n_azimuth": 4500, "n_elevation": 640}  # ~2 M points per scan
+SMALL_RAYS = {"n_azimuth": 1424, "n_elevation": 202}  # a tenth of the rays: ~0.2 M points
 
 
-def _key() -> str:
-    text = (ROOT / "ndt_cli" / "sim.py").read_bytes()
-    return hashlib.sha256(text + repr((N_SCANS, SEED, RAYS)).encode()).hexdigest()[:12]
+def _key(rays: dict[str, int]) -> str:
+    sources = sorted((ROOT / "ndt_cli" / "sim").glob("*.py"))
+    text = b"".join(f.read_bytes() for f in sources)
+    return hashlib.sha256(text + repr((N_SCANS, SEED, rays)).encode()).hexdigest()[:12]
 
 
 def street() -> tuple[list[Path], Path]:
     """Six ~2 M-point LAS scans of one street and their ``T_world_scan`` poses file."""
-    folder = CACHE / f"street_{_key()}"
+    return _street("street", RAYS)
+
+
+def street_small() -> tuple[list[Path], Path]:
+    """The same six standpoints and poses scanned with a tenth of the rays (~0.2 M points)."""
+    return _street("street_small", SMALL_RAYS)
+
+
+def _street(name: str, rays: dict[str, int]) -> tuple[list[Path], Path]:
+    folder = CACHE / f"{name}_{_key(rays)}"
     files = [folder / f"scan_{k:02d}.las" for k in range(N_SCANS)]
     poses_file = folder / "poses_T_world_scan.txt"
     if poses_file.exists() and all(f.exists() for f in files):
         return files, poses_file
     folder.mkdir(parents=True, exist_ok=True)
-    print(f"making {N_SCANS} full-density scans in {folder} (once) ...", flush=True)
-    _, scans, poses = sim.make_sequence(seed=SEED, n_scans=N_SCANS, scan_kwargs=RAYS)
+    print(f"making {N_SCANS} scans ({rays}) in {folder} (once) ...", flush=True)
+    _, scans, poses = sim.make_sequence(seed=SEED, n_scans=N_SCANS, scan_kwargs=rays)
     for f, pts in zip(files, scans, strict=True):
         io.write(f, pts)
     lines = [
@@ -56,7 +69,7 @@ def tiled(base: Path, n_points: int) -> Path:
     if n_points < len(pts):  # a regular subset: the same scene, thinner
         pts = pts[np.linspace(0, len(pts) - 1, n_points).astype(np.int64)]
     header = laspy.LasHeader(point_format=0, version="1.2")
-    header.scales = np.full(3, io.LAS_SCALE)
+    header.scales = np.full(3, LAS_SCALE)
     header.offsets = np.zeros(3)
     tmp = out.with_suffix(".tmp")
     written, k = 0, 0
