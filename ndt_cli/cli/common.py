@@ -18,6 +18,7 @@ from typing import Annotated, Any
 import typer
 from typer.core import TyperCommand, TyperGroup
 
+from ndt_cli.core.logs import PROGRESS
 from ndt_cli.errors import NdtError, UserInterruptError
 
 try:  # typer >= 0.2x vendors click
@@ -43,7 +44,7 @@ PrintConfigOpt = Annotated[
     bool,
     typer.Option("--print-config", help="Print the effective config (commented YAML) and exit."),
 ]
-QuietOpt = Annotated[bool, typer.Option("--quiet", "-q", help="Print errors only.")]
+QuietOpt = Annotated[bool, typer.Option("--quiet", "-q", help="Print only warnings and errors.")]
 VerboseOpt = Annotated[
     bool, typer.Option("--verbose", "-v", help="Debug messages of ndt-cli (never of libraries).")
 ]
@@ -53,7 +54,6 @@ ResultDirArg = Annotated[
     Path | None, typer.Argument(help="Output folder of ndt-chain or ndt-register.")
 ]
 
-PROGRESS = "ndt_cli.progress"  # lines shown as the work goes on (not held back)
 _log = logging.getLogger("ndt_cli")
 
 

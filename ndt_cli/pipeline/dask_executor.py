@@ -14,10 +14,9 @@ import uuid
 from collections.abc import Hashable, Iterator
 from typing import Any
 
+from ndt_cli.core.logs import PROGRESS
 from ndt_cli.errors import ConfigError
 from ndt_cli.pipeline.workers import Task, set_threads
-
-log = logging.getLogger(__name__)
 
 
 def _in_worker(threads: int, task: Task) -> Any:
@@ -51,7 +50,7 @@ class DaskPool:
                     n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=":0"
                 )
                 self.client = Client(self._cluster)
-                log.warning("Dask dashboard: %s", self.client.dashboard_link)
+                logging.getLogger(PROGRESS).info("Dask dashboard: %s", self.client.dashboard_link)
             else:
                 self.client = Client(scheduler, timeout="30s")
         except (OSError, TimeoutError) as exc:
