@@ -1,10 +1,14 @@
 """Multi-slice 2D NDT registration of two scans (Ripperda & Brenner 2005), in named stages.
 
-1. **Start search** (no initial guess, :mod:`ndt_cli.ndt.search`): many starts at the coarsest
-   cell size, the best distinct solutions kept as candidates. With a guess, the guess is the
-   only candidate and every cell size is a refinement level.
+1. **Start search** (no initial guess, :mod:`ndt_cli.ndt.search`): by default the exact global
+   branch-and-bound search over (x, y, yaw) (:mod:`ndt_cli.ndt.bnb`), whose best distinct poses
+   are the candidates; when its second pose scores nearly as well as its best, the grid of
+   Newton starts at the coarsest cell runs too and its candidates join (``search.method:
+   starts``: the grid alone). With a guess, the guess is the only candidate and every cell size
+   is a refinement level.
 2. **Coarse to fine** (:mod:`ndt_cli.ndt.coarse_to_fine`): every candidate refined through the
-   finer cell sizes, with restarts from +-1/2 and +-1 cell offsets at each level.
+   finer cell sizes (from ``search.bnb_start_cell`` after the global search), with restarts
+   from +-1/2 and +-1 cell offsets at the first of them (after the global search) or at each.
 3. **Winner by evidence**: fit-weighted scores over the three finest levels; the second
    distinct candidate's share is the ambiguity.
 4. **Quality metrics** of the winner at the finest cell (:mod:`ndt_cli.ndt.quality`).
