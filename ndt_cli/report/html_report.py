@@ -11,6 +11,7 @@ import shlex
 import sys
 from collections.abc import Iterable
 from datetime import UTC, datetime
+from typing import Any
 
 import numpy as np
 
@@ -85,11 +86,7 @@ def chain_report(
         ("run time", f"{runtime_s:.1f} s"),
     )
     figures = () if topview is None else (Figure(topview, _TOPVIEW),)
-    report = HtmlReport(
-        title="Registration report",
-        command=_command(),
-        created=datetime.now(UTC).replace(microsecond=0),
-        version=_version(),
+    return _render(
         verdict=verdict,
         summary=summary,
         scans=tuple(
@@ -101,7 +98,6 @@ def chain_report(
         config_yaml=config_yaml,
         notes=_NOTES,
     )
-    return render_html(report)
 
 
 def register_report(result: RegistrationResult, config_yaml: str) -> str:
@@ -126,18 +122,13 @@ def register_report(result: RegistrationResult, config_yaml: str) -> str:
     )
     verdict = Verdict(result.ok, "" if result.ok else f"{result.status.value}")
     summary = (("status", result.status.value), ("run time", f"{result.runtime_s:.1f} s"))
-    report = HtmlReport(
-        title="Registration report",
-        command=_command(),
-        created=datetime.now(UTC).replace(microsecond=0),
-        version=_version(),
+    return _render(
         verdict=verdict,
         summary=summary,
         scans=scans,
         links=(link,),
         config_yaml=config_yaml,
     )
-    return render_html(report)
 
 
 def _counts(values: Iterable[str]) -> str:
@@ -162,3 +153,17 @@ _NOTES = (
     "with the others (its residual exceeds what the links' uncertainties allow, chi-square "
     "p = 0.999); unused = not part of the adjustment.",
 )
+
+
+def _render(**content: Any) -> str:
+    """The page of a run: ``content`` (verdict, summary, tables, ...) under the header every
+    report shares (the command, the time in UTC, the version)."""
+    created = datetime.now(UTC).replace(microsecond=0)
+    report = HtmlReport(
+        title="Registration report",
+        command=_command(),
+        created=created,
+        version=_version(),
+        **content,
+    )
+    return render_html(report)
