@@ -39,3 +39,20 @@ def street_files(folder: Path, n_scans: int = 4, seed: int = 21) -> tuple[list[P
         files.append(folder / f"scan_{k}.laz")
         io.write(files[-1], pts)
     return files, poses
+
+
+def unmatched_pair(folder: Path) -> tuple[Path, Path]:
+    """Two xyz scans of one flat ground, one with a layer of points at 1 m, the other at 8 m:
+    nothing in any slice of one matches the other, so registering them fails (exit 1)."""
+    import numpy as np
+
+    from ndt_cli import io
+
+    rng = np.random.default_rng(0)
+    ground = np.column_stack([rng.uniform(-20, 20, (20000, 2)), rng.normal(0, 0.01, 20000)])
+    low = np.column_stack([rng.uniform(-10, 10, (3000, 2)), np.full(3000, 1.0)])
+    high = np.column_stack([rng.uniform(-10, 10, (3000, 2)), np.full(3000, 8.0)])
+    a, b = folder / "a.xyz", folder / "b.xyz"
+    io.write(a, np.vstack([ground, low]))
+    io.write(b, np.vstack([ground, high]))
+    return a, b

@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 import yaml
+from conftest import unmatched_pair
 from typer.testing import CliRunner
 
 from ndt_cli import io, sim
@@ -111,15 +112,8 @@ def test_unwritable_output_is_exit_2(pair, tmp_path):
 
 
 def test_failed_registration_is_exit_1(tmp_path):
-    rng = np.random.default_rng(0)
-    ground = np.column_stack([rng.uniform(-20, 20, (20000, 2)), rng.normal(0, 0.01, 20000)])
-    low = np.column_stack([rng.uniform(-10, 10, (3000, 2)), np.full(3000, 1.0)])
-    high = np.column_stack([rng.uniform(-10, 10, (3000, 2)), np.full(3000, 8.0)])
-    io.write(tmp_path / "a.xyz", np.vstack([ground, low]))
-    io.write(tmp_path / "b.xyz", np.vstack([ground, high]))
-    res = runner.invoke(
-        register_app, [str(tmp_path / "a.xyz"), str(tmp_path / "b.xyz"), "-o", str(tmp_path / "o")]
-    )
+    a, b = unmatched_pair(tmp_path)
+    res = runner.invoke(register_app, [str(a), str(b), "-o", str(tmp_path / "o")])
     assert res.exit_code == 1 and "no_overlap" in res.stderr
     assert json.loads((tmp_path / "o" / "result.json").read_text())["status"] == "no_overlap"
 

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import unmatched_pair
 from typer.testing import CliRunner
 
 import ndt_cli
@@ -178,15 +179,8 @@ def test_kill_9_while_publishing_leaves_old_or_new_never_a_mix(first_result, tmp
 
 def test_a_run_ending_in_exit_1_replaces_the_earlier_result(first_result, tmp_path):
     out = _copy(first_result, tmp_path / "out")
-    rng = np.random.default_rng(0)
-    ground = np.column_stack([rng.uniform(-20, 20, (20000, 2)), rng.normal(0, 0.01, 20000)])
-    low = np.column_stack([rng.uniform(-10, 10, (3000, 2)), np.full(3000, 1.0)])
-    high = np.column_stack([rng.uniform(-10, 10, (3000, 2)), np.full(3000, 8.0)])
-    io.write(tmp_path / "a.xyz", np.vstack([ground, low]))
-    io.write(tmp_path / "b.xyz", np.vstack([ground, high]))
-    res = runner.invoke(
-        register_app, [str(tmp_path / "a.xyz"), str(tmp_path / "b.xyz"), "-o", str(out)]
-    )
+    a, b = unmatched_pair(tmp_path)
+    res = runner.invoke(register_app, [str(a), str(b), "-o", str(out)])
     assert res.exit_code == 1
     data = json.loads((out / "result.json").read_text())
     assert data["status"] == "no_overlap" and data["source"].endswith("b.xyz")
