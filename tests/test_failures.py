@@ -237,7 +237,7 @@ def test_nothing_is_read_before_the_output_and_both_inputs_are_checked(tmp_path,
     from ndt_cli.ndt import register as reg
 
     calls = []
-    monkeypatch.setattr(reg, "load_and_prepare", lambda *a, **k: calls.append(a) or 1 / 0)
+    monkeypatch.setattr(reg, "load_and_prepare_pair", lambda *a, **k: calls.append(a) or 1 / 0)
     a, b = str(SAMPLE / "scan_00.laz"), str(SAMPLE / "scan_01.laz")
     blocker = tmp_path / "file"
     blocker.write_text("x")

@@ -154,6 +154,30 @@ def test_a_streamed_scan_is_prepared_like_one_read_at_once(tilted_scan, tmp_path
     np.testing.assert_allclose(streamed.points3d, whole.points3d, atol=1e-9)
 
 
+def test_a_pair_prepared_in_two_threads_equals_each_scan_prepared_alone(tilted_scan, tmp_path):
+    from ndt_cli import io
+    from ndt_cli.config import Config
+    from ndt_cli.errors import InputError
+    from ndt_cli.ndt.prepare import load_and_prepare, load_and_prepare_pair
+
+    pts, _ = tilted_scan
+    a, b = tmp_path / "a.las", tmp_path / "b.las"
+    io.write(a, pts)
+    io.write(b, pts[::2] + [4.0, -3.0, 0.0])
+    cfg = Config().replace(input={"chunk_points": len(pts) // 3})  # a is streamed, b is not
+    pair = load_and_prepare_pair(a, b, cfg)
+    for got, path in zip(pair, (a, b), strict=True):
+        alone = load_and_prepare(path, cfg)
+        assert got.path == path
+        np.testing.assert_array_equal(got.reduction, alone.reduction)
+        np.testing.assert_array_equal(got.points3d, alone.points3d)
+        for s, t in zip(got.slices, alone.slices, strict=True):
+            np.testing.assert_array_equal(s, t)
+    empty = Config().replace(input={"max_range": 0.01})  # both fail: the target's error wins
+    with pytest.raises(InputError, match="a.las"):
+        load_and_prepare_pair(a, b, empty)
+
+
 def test_slice_pass_matches_its_numpy_twin_with_overlapping_slices():
     from ndt_cli.core.geometry import VoxelThinner
     from ndt_cli.core.transforms import levelling_rotation

@@ -21,7 +21,7 @@ MAX_SLICES = 63  # slice membership is a bit mask in an int64
 Grouped = tuple[np.ndarray, np.ndarray, np.ndarray]  # voxel keys, (n,3) sums, counts
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _bounds(points):  # pragma: no cover - compiled
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
@@ -40,7 +40,7 @@ def bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return _bounds(np.ascontiguousarray(points, dtype=np.float64))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _slice_pass(
     points, reduction, level, heights, half, voxel, mask, xy, keys, sums, counts
 ):  # pragma: no cover - compiled

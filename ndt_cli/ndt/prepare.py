@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Iterable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -296,3 +297,18 @@ def load_and_prepare(
 ) -> PreparedScan:
     """Read a scan (streamed when large, see :class:`ScanChunks`) and prepare it."""
     return load_and_prepare_chunks(ScanChunks.of(scan, cfg.input), cfg, kernels)
+
+
+def load_and_prepare_pair(
+    target: str | Path | np.ndarray,
+    source: str | Path | np.ndarray,
+    cfg: Config,
+    kernels: Kernels = NUMBA,
+) -> tuple[PreparedScan, PreparedScan]:
+    """:func:`load_and_prepare` of two scans at once, one thread each: reading, the passes over
+    the points and the thinning release the GIL, so two cores prepare a pair in about the time
+    of one scan. The scans are independent, so the results are those of two calls in turn; the
+    target's error, if any, is the one raised."""
+    with ThreadPoolExecutor(max_workers=2, thread_name_prefix="prepare") as pool:
+        jobs = [pool.submit(load_and_prepare, scan, cfg, kernels) for scan in (target, source)]
+        return jobs[0].result(), jobs[1].result()

@@ -32,7 +32,7 @@ from ndt_cli.core.transforms import pose2d_matrix, yaw_of
 from ndt_cli.ndt.backend import NUMBA, Kernels
 from ndt_cli.ndt.coarse_to_fine import Ranked, coarse_to_fine, rank, with_verification
 from ndt_cli.ndt.levels import SourceSampler, TargetMaps, gate_inputs
-from ndt_cli.ndt.prepare import PreparedScan, load_and_prepare
+from ndt_cli.ndt.prepare import PreparedScan, load_and_prepare_pair
 from ndt_cli.ndt.quality import Fit, Verdict, judge, measure_fit
 from ndt_cli.ndt.refine import Refinement, refine_pose
 from ndt_cli.ndt.result import LevelStats, RegistrationResult
@@ -245,8 +245,7 @@ def register(
 
     t0 = time.perf_counter()
     cfg = config if isinstance(config, Config) else load(config)
-    tgt = load_and_prepare(target, cfg, kernels)
-    src = load_and_prepare(source, cfg, kernels)
+    tgt, src = load_and_prepare_pair(target, source, cfg, kernels)
     t_read = time.perf_counter() - t0
     result = register_prepared(tgt, src, cfg, init, kernels)
     timings = {"read_prepare_s": t_read, **result.timings}
