@@ -163,7 +163,7 @@ def test_a_pair_prepared_in_two_threads_equals_each_scan_prepared_alone(tilted_s
     pts, _ = tilted_scan
     a, b = tmp_path / "a.las", tmp_path / "b.las"
     io.write(a, pts)
-    io.write(b, pts[::2] + [4.0, -3.0, 0.0])
+    io.write(b, pts[::2] + np.array([4.0, -3.0, 0.0]))
     cfg = Config().replace(input={"chunk_points": len(pts) // 3})  # a is streamed, b is not
     pair = load_and_prepare_pair(a, b, cfg)
     for got, path in zip(pair, (a, b), strict=True):
@@ -174,7 +174,7 @@ def test_a_pair_prepared_in_two_threads_equals_each_scan_prepared_alone(tilted_s
         for s, t in zip(got.slices, alone.slices, strict=True):
             np.testing.assert_array_equal(s, t)
     empty = Config().replace(input={"max_range": 0.01})  # both fail: the target's error wins
-    with pytest.raises(InputError, match="a.las"):
+    with pytest.raises(InputError, match=r"a\.las"):
         load_and_prepare_pair(a, b, empty)
 
 
