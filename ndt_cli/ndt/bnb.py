@@ -57,7 +57,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.ndimage import distance_transform_edt
 
 from ndt_cli.core.transforms import wrap_angle
 from ndt_cli.ndt import bnb_kernels
@@ -91,6 +90,8 @@ def likelihood_field(
 ) -> ScoreField:
     """Per slice: 255 on every pixel holding a target point, ``255 exp(-d^2 / 2 sigma^2)`` at
     ``d`` pixels from the nearest such pixel (rounded; 0 beyond ~3.3 sigma)."""
+    from scipy import ndimage  # here, not at start-up: a command that never searches skips it
+
     if resolution <= 0 or sigma_px <= 0:
         raise ValueError("need resolution > 0 and sigma_px > 0")
     xy = [np.reshape(s, (-1, 2)) for s in target_slices]
@@ -107,7 +108,7 @@ def likelihood_field(
         ij = np.floor(s / resolution).astype(np.int64) - lo
         empty = np.ones(shape, bool)
         empty[ij[:, 0], ij[:, 1]] = False
-        d = distance_transform_edt(empty)
+        d = ndimage.distance_transform_edt(empty)
         values[k] = np.rint(FIELD_MAX * np.exp(-0.5 * (d / sigma_px) ** 2)).astype(np.uint8)
     return ScoreField(values, lo * resolution, resolution, _centre(target_slices))
 
