@@ -11,16 +11,18 @@ import shlex
 import sys
 from collections.abc import Iterable
 from datetime import UTC, datetime
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ndt_cli.core.transforms import yaw_of
-from ndt_cli.ndt.result import RegistrationResult
-from ndt_cli.pipeline.chain import ChainResult
-from ndt_cli.pipeline.links import Link
-from ndt_cli.pipeline.solution import LinkFit, ScanPose
 from ndt_cli.report.html import Figure, HtmlReport, LinkRow, ScanRow, Verdict, render_html
+
+if TYPE_CHECKING:  # a pair's report does not load the network's modules
+    from ndt_cli.ndt.result import RegistrationResult
+    from ndt_cli.pipeline.chain import ChainResult
+    from ndt_cli.pipeline.links import Link
+    from ndt_cli.pipeline.solution import LinkFit, ScanPose
 
 
 def _command() -> str:
