@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ndt_cli.core.groups import group_keys, group_sums
 from ndt_cli.ndt.grid import build_map, regularised_inverse
 from ndt_cli.ndt.slicing import cut_slices, estimate_ground, subsample, voxel_filter_2d
 
@@ -23,6 +24,22 @@ def test_cell_mean_and_covariance_match_numpy():
         inv = np.linalg.inv(np.cov(xy[cell].T))
         np.testing.assert_allclose(m.icov[row], [inv[0, 0], inv[0, 1], inv[1, 1]], rtol=1e-9)
     assert m.counts.sum() == len(xy)  # the grid covers all points: none dropped
+
+
+@pytest.mark.parametrize("spread", [50, 10**9])  # a dense count array, and np.unique's path
+def test_grouping_is_bit_identical_to_unique_and_add_at(spread):
+    rng = np.random.default_rng(3)
+    keys = rng.integers(0, spread, 20_000)
+    values = rng.normal(0, 100, (20_000, 3))
+    ref_keys, ref_inverse, ref_counts = np.unique(keys, return_inverse=True, return_counts=True)
+    ref_sums = np.zeros((ref_keys.size, 3))
+    np.add.at(ref_sums, ref_inverse, values)
+    got_keys, got_inverse, got_counts = group_keys(keys)
+    assert np.array_equal(got_keys, ref_keys) and np.array_equal(got_counts, ref_counts)
+    assert np.array_equal(got_inverse, ref_inverse)
+    assert np.array_equal(group_sums(got_inverse, values, got_keys.size), ref_sums)  # bits
+    empty = group_keys(np.zeros(0, np.int64))
+    assert all(len(a) == 0 for a in empty)
 
 
 def test_cells_with_too_few_points_are_empty():

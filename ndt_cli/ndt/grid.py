@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ndt_cli.core.groups import group_keys, group_sums
 from ndt_cli.errors import ConfigError
 
 MAX_INDEX_CELLS = 100_000_000  # dense index entries over all grids (400 MB of int32)
@@ -65,15 +66,14 @@ def cell_statistics(
     ij = np.floor((xy - origin) / cell_size).astype(np.int64)
     nx, ny = int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1
     keys_all = ij[:, 0] * ny + ij[:, 1]
-    keys, inverse, counts = np.unique(keys_all, return_inverse=True, return_counts=True)
+    keys, inverse, counts = group_keys(keys_all)
     n = counts.astype(np.float64)
     # centre on the cell's own mean before the second moments (no cancellation)
-    sums = np.zeros((keys.size, 2))
-    np.add.at(sums, inverse, xy)
-    means = sums / n[:, None]
+    means = group_sums(inverse, xy, keys.size) / n[:, None]
     d = xy - means[inverse]
-    m2 = np.zeros((keys.size, 3))
-    np.add.at(m2, inverse, np.column_stack([d[:, 0] ** 2, d[:, 0] * d[:, 1], d[:, 1] ** 2]))
+    m2 = group_sums(
+        inverse, np.column_stack([d[:, 0] ** 2, d[:, 0] * d[:, 1], d[:, 1] ** 2]), keys.size
+    )
     keep = counts >= min_points
     keys, means, m2, counts = keys[keep], means[keep], m2[keep], counts[keep]
     cov = np.empty((keys.size, 2, 2))

@@ -10,6 +10,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ndt_cli.core.groups import group_keys, group_sums
+
 GROUND_SAMPLE = 400_000  # points of a regular sample enough for the ground and the levelling
 
 
@@ -83,10 +85,8 @@ def voxel_filter_2d(xy: np.ndarray, voxel: float) -> np.ndarray:
     ij = np.floor(xy / voxel).astype(np.int64)
     ij -= ij.min(axis=0)
     keys = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
-    _, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
-    out = np.zeros((counts.size, 2))
-    np.add.at(out, inverse, xy)
-    return out / counts[:, None]
+    _, inverse, counts = group_keys(keys)
+    return group_sums(inverse, xy, counts.size) / counts[:, None]
 
 
 def subsample(xy: np.ndarray, cap: int, seed: int = 0) -> np.ndarray:
