@@ -14,10 +14,11 @@ from ndt_cli.pipeline.covariance import (
     left_to_right_jacobian,
     ndt_covariance,
     relative_covariance,
+    rotation_log,
     se3_log,
     sqrt_information,
 )
-from ndt_cli.pipeline.graph import Edge, bridges
+from ndt_cli.pipeline.graph import Edge, bridges, components
 from ndt_cli.pipeline.verify import EdgeState, NodeStatus, _node_verdicts, verify
 
 N_MC = 20_000
@@ -175,6 +176,39 @@ def test_se3_log_is_gtsams_logmap():
     D = [gtsam.Pose3.Expmap(rng.normal(0, s, 6)).matrix() for s in (1e-9, 1e-4, 0.3, 1.5)]
     ref = [gtsam.Pose3.Logmap(gtsam.Pose3(d)) for d in D]
     assert np.allclose(se3_log(np.array(D)), ref, atol=1e-8)
+
+
+def test_rotation_log_matches_scipy_at_every_angle():
+    """Against scipy's rotation vectors: random axes at angles from 0 to 180 degrees, the
+    identity, and exact half turns about each axis (where only one diagonal form is stable);
+    a half turn's vector is defined up to its sign."""
+    rng = np.random.default_rng(11)
+    axes = rng.normal(size=(400, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    angles = np.concatenate(
+        [[0.0, 1e-14, 1e-9], rng.uniform(0, np.pi, 394), np.pi - np.array([1e-9, 1e-6, 1e-3])]
+    )
+    v = axes * angles[:, None]
+    got = rotation_log(rot(v))
+    assert np.allclose(got, Rotation.from_matrix(rot(v)).as_rotvec(), atol=1e-9)
+    assert np.allclose(got, v, atol=1e-6)
+    half = np.pi * np.eye(3)
+    assert np.allclose(np.abs(rotation_log(rot(half))), np.abs(half), atol=1e-12)
+
+
+def test_components_match_scipys_connected_components():
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    rng = np.random.default_rng(4)
+    for n, m in [(1, 0), (5, 0), (12, 6), (40, 30), (200, 180)]:
+        pairs = [tuple(int(x) for x in rng.choice(n, 2)) for _ in range(m)]
+        a = np.array([p[0] for p in pairs], dtype=int)
+        b = np.array([p[1] for p in pairs], dtype=int)
+        ref = connected_components(coo_matrix((np.ones(m), (a, b)), shape=(n, n)), directed=False)[
+            1
+        ]
+        assert np.array_equal(components(n, pairs), ref)
 
 
 def test_sqrt_information_rejects_what_is_not_a_covariance():

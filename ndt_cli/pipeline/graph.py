@@ -82,14 +82,26 @@ class EdgeResidual:
 
 
 def components(n_nodes: int, pairs: Sequence[tuple[int, int]]) -> np.ndarray:
-    """Connected-component label of every node (int array) for undirected ``pairs``."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    """Connected-component label of every node (int array) for undirected ``pairs``; labels
+    count up from 0 in the order of each component's lowest node (union-find with path
+    halving: linear in practice, and no sparse-matrix library for a few thousand edges)."""
+    parent = list(range(n_nodes))
 
-    a = np.array([p[0] for p in pairs], dtype=int)
-    b = np.array([p[1] for p in pairs], dtype=int)
-    graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(n_nodes, n_nodes))
-    return connected_components(graph, directed=False)[1]
+    def root(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    for a, b in pairs:
+        ra, rb = root(int(a)), root(int(b))
+        if ra != rb:
+            parent[max(ra, rb)] = min(ra, rb)  # the lowest node is the root
+    labels = np.empty(n_nodes, dtype=int)
+    by_root: dict[int, int] = {}
+    for node in range(n_nodes):
+        labels[node] = by_root.setdefault(root(node), len(by_root))
+    return labels
 
 
 def bridges(n_nodes: int, edges: Sequence[Edge], ids: Sequence[int]) -> set[int]:
