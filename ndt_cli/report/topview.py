@@ -23,7 +23,10 @@ def _points(ax: Any, result: ChainResult, colours: Any) -> None:
             continue
         if pts is not None:
             w = pts @ T[:3, :3].T + T[:3, 3]
-            ax.scatter(w[:, 0], w[:, 1], s=0.3, color=colours(k % 10), label=result.names[k])
+            # markers of one line, not a scatter: the same dots, drawn in a fraction of the time
+            ax.plot(
+                w[:, 0], w[:, 1], ".", ms=1.6, mew=0, color=colours(k % 10), label=result.names[k]
+            )
         marker, colour = _MARKERS.get(scan.status.value, ("x", "red"))
         ax.plot(T[0, 3], T[1, 3], marker, color=colour, ms=8)
         label = str(k) if scan.status.value == "ok" else f"{k} {scan.status.value}"
@@ -75,5 +78,5 @@ def topview_png(result: ChainResult) -> bytes | None:
         + (f"\nnot ok: {', '.join(not_ok)}" if not_ok else "")
     )
     if result.previews:
-        ax.legend(markerscale=20, fontsize="small", loc="best")
+        ax.legend(markerscale=6, fontsize="small", loc="best")
     return png_bytes(fig)
