@@ -4,6 +4,8 @@ unreadable scans, and the real MULLS street sequence."""
 from __future__ import annotations
 
 import json
+import os
+import subprocess
 import sys
 
 import numpy as np
@@ -74,6 +76,56 @@ def test_chain_recovers_ground_truth_and_jobs_do_not_matter(sequence, tmp_path):
     res2 = run(files, tmp_path / "j2", "--jobs", "2")
     assert res2.exit_code == 0
     assert outputs(tmp_path / "j1") == outputs(tmp_path / "j2")
+
+
+START_METHOD = """
+import sys, threading, numba, numpy as np
+from ndt_cli import io
+from ndt_cli.pipeline.local_pool import start_method
+print(start_method())
+stop = threading.Event()
+other = threading.Thread(target=stop.wait)
+other.start()
+print(start_method())
+stop.set()
+other.join()
+print(start_method())
+io.read(sys.argv[1])  # the LAZ decoder's thread pool runs
+print(start_method())
+"""
+
+
+def test_workers_are_forked_only_from_a_parent_with_one_thread(sequence):
+    """Fork from a fresh process with Numba imported; spawn while another thread runs, and
+    once a thread pool (here the LAZ decoder's) has run: a forked child could wait forever."""
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    out = subprocess.run(
+        [sys.executable, "-c", START_METHOD, str(sequence[0][0])],
+        capture_output=True,
+        text=True,
+        check=True,
+        env=env,
+    ).stdout.split()
+    assert out == ["fork", "spawn", "fork", "spawn"]
+
+
+@pytest.mark.slow
+def test_forked_and_spawned_workers_give_the_same_network(sequence, tmp_path):
+    """The command forks its workers; a process whose Numba threads ran spawns them. The
+    outputs are the same."""
+    import numba
+
+    from ndt_cli.pipeline.local_pool import start_method
+
+    files, _ = sequence
+    numba.njit(parallel=True)(lambda a: a.sum())(np.ones(4))  # Numba's threads run here
+    assert start_method() == "spawn"
+    assert run(files, tmp_path / "spawned", "--jobs", "2").exit_code == 0
+    cmd = [*CHAIN, *map(str, files), "--out", str(tmp_path / "forked"), "--jobs", "2"]
+    forked = subprocess.run([*cmd, "--verbose"], capture_output=True, text=True)
+    assert forked.returncode == 0, forked.stderr
+    assert "worker process(es) by fork" in forked.stderr
+    assert outputs(tmp_path / "spawned") == outputs(tmp_path / "forked")
 
 
 @pytest.mark.slow

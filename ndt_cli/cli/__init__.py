@@ -4,6 +4,12 @@ Exit codes: 0 success, 1 registration failed or not trustworthy, 2 bad input or 
 stopped by Ctrl-C. Heavy modules are imported inside the commands so that ``--help`` stays fast.
 """
 
+import os
+
+# One BLAS thread: a command's heavy work runs in Numba's threads, which BLAS threads would spin
+# against, and a chain's process can fork its workers only while it has a single thread.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 from ndt_cli.cli.analyze import analyze_app
 from ndt_cli.cli.chain import chain_app
 from ndt_cli.cli.evaluate import eval_app

@@ -180,9 +180,12 @@ def _run(
     from ndt_cli.pipeline.executors import make_executor
     from ndt_cli.pipeline.scans import scan_names
     from ndt_cli.report.chain_outputs import write_chain_outputs
+    from ndt_cli.report.figures import start_warm_up
 
     t0 = time.perf_counter()
     pool = make_executor(opts.executor, opts.jobs, opts.scheduler)
+    pool.start()  # before this process starts threads of its own
+    start_warm_up()  # the top view's library loads while the workers register
     names = tuple(scan_names(paths))
     total = len(paths) * net.neighbours - net.neighbours * (net.neighbours + 1) // 2
     with ChainProgress(names, max(total, 1) + len(net.pairs), enabled=opts.progress) as advance:

@@ -56,6 +56,9 @@ class DaskPool:
         except (OSError, TimeoutError) as exc:
             raise ConfigError(f"cannot reach the Dask scheduler {scheduler}: {exc}") from None
 
+    def start(self) -> None:
+        """Nothing to do: the cluster is up once the client is connected."""
+
     def run(self, tasks: dict[Hashable, Task]) -> Iterator[tuple[Hashable, Any]]:
         """Yield (key, result) as tasks finish; a task that raised yields its one-line reason."""
         from dask.distributed import as_completed

@@ -2,14 +2,20 @@
 
 from __future__ import annotations
 
+import logging
 import multiprocessing
+import os
 import signal
+import sys
+import threading
 from collections.abc import Callable, Hashable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 from ndt_cli.pipeline.workers import Task, set_threads, threads_per_job
+
+log = logging.getLogger(__name__)
 
 
 def _init_worker(threads: int, init: Callable[[], None] | None) -> None:
@@ -19,14 +25,33 @@ def _init_worker(threads: int, init: Callable[[], None] | None) -> None:
         init()
 
 
+def start_method() -> str:
+    """How worker processes start: ``fork`` where it is safe, else ``spawn``.
+
+    A forked worker inherits the modules its parent imported (numpy, Numba, the package: about
+    a second of start-up per worker saved). Forking is safe only from a process that has one
+    thread: a thread pool that ran in the parent (Numba's OpenMP threads, the LAZ decoder's
+    threads, BLAS threads) exists in the child without its threads, and the child's first
+    parallel call waits for them forever. Linux only (macOS system libraries are not
+    fork-safe).
+    """
+    if sys.platform != "linux" or threading.active_count() > 1:
+        return "spawn"
+    try:
+        threads = len(os.listdir("/proc/self/task"))
+    except OSError:
+        return "spawn"
+    return "fork" if threads == 1 else "spawn"
+
+
 class WorkerPool:
     """Worker processes that survive a worker dying.
 
-    Processes are spawned, not forked: a forked child of a process whose Numba threads already
-    ran can deadlock. When a worker dies (killed, out of memory, a crash in a library), every
-    task in flight fails with BrokenProcessPool; those tasks are then rerun one at a time in a
-    fresh single-worker pool, so only the task that kills its worker fails. ``init`` runs once
-    in every worker process before its first task.
+    Workers are forked where that is safe (:func:`start_method`), else spawned. When a worker
+    dies (killed, out of memory, a crash in a library), every task in flight fails with
+    BrokenProcessPool; those tasks are then rerun one at a time in a fresh single-worker pool,
+    so only the task that kills its worker fails. ``init`` runs once in every worker process
+    before its first task.
     """
 
     ships_data = True
@@ -41,13 +66,22 @@ class WorkerPool:
 
     def _new(self, workers: int) -> ProcessPoolExecutor:
         self.close()
+        method = start_method()
+        log.debug("starting %d worker process(es) by %s", workers, method)
         self._pool = ProcessPoolExecutor(
             max_workers=workers,
-            mp_context=multiprocessing.get_context("spawn"),
+            mp_context=multiprocessing.get_context(method),
             initializer=_init_worker,
             initargs=(self.threads, self._init),
         )
         return self._pool
+
+    def start(self) -> None:
+        """Start the workers now rather than at the first task: a command starts them before
+        it starts threads of its own (a progress display), so that they can be forked, and
+        they start while it does other work."""
+        if self._pool is None:
+            self._new(self.jobs).submit(os.getpid)
 
     def run(self, tasks: dict[Hashable, Task]) -> Iterator[tuple[Hashable, Any]]:
         """Yield (key, result) as tasks finish; a task that fails yields its one-line reason."""
@@ -75,8 +109,11 @@ class WorkerPool:
         self._pool = None
 
     def close(self) -> None:
+        """Release the workers. Their results are all collected by then, so the parent does
+        not wait for them to exit (freeing their memory takes a good part of a second): they
+        are joined when the interpreter exits."""
         if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool.shutdown(wait=False, cancel_futures=True)
             self._pool = None
 
 
