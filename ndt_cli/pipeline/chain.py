@@ -101,7 +101,7 @@ class _ChainRun:
         self.paths, self.cfg, self.executor = paths, cfg, executor
         self.store = LinkStore(out)
         self.cfg_text = dump(cfg)
-        self.hashes = [file_hash(p) for p in paths]
+        self._hashes: dict[int, str] = {}
         self.on_progress = report
         self.unreadable: dict[int, str] = {}
         self.finished: dict[tuple[int, int], Link] = {}
@@ -110,13 +110,20 @@ class _ChainRun:
         self.reused: set[tuple[int, int]] = set()
         self.order: list[tuple[int, int]] = []  # pairs in the order the links were planned
 
+    def hash(self, i: int) -> str:
+        """Scan ``i``'s file hash, computed when first needed: a run that does not resume
+        hashes its scans while the workers prepare them."""
+        if i not in self._hashes:
+            self._hashes[i] = file_hash(self.paths[i])
+        return self._hashes[i]
+
     def jobs(self, planned: Sequence[PlannedLink], guesses: dict | None = None) -> list[LinkJob]:
         """One job per planned link, keyed by its inputs (and a loop closure's guess)."""
         out = []
         for k in planned:
             guess = (guesses or {}).get((k.target, k.source))
             extra = "" if guess is None else " ".join(f"{v:.6f}" for v in guess.ravel())
-            key = link_key(self.hashes[k.target], self.hashes[k.source], self.cfg_text + extra)
+            key = link_key(self.hash(k.target), self.hash(k.source), self.cfg_text + extra)
             index = len(self.order) + len(out)
             out.append(LinkJob(index, k.target, k.source, key, k.kind, guess))
         return out
@@ -129,9 +136,9 @@ class _ChainRun:
                 self.finished[(job.target, job.source)] = job.adopt(link)
                 self.reused.add((job.target, job.source))
 
-    def prepare(self, jobs: list[LinkJob]) -> None:
+    def prepare(self, planned: Sequence[PlannedLink]) -> None:
         """Read and slice, once and in parallel, each scan that an unfinished link needs."""
-        todo = [j for j in jobs if (j.target, j.source) not in self.finished]
+        todo = [j for j in planned if (j.target, j.source) not in self.finished]
         needed = {s for j in todo for s in (j.target, j.source)}
         needed = sorted(needed - set(self.prepared) - set(self.unreadable) - set(self._previewed()))
         task = prepare_scan if self.executor.ships_data else _preview_or_problem
@@ -151,7 +158,7 @@ class _ChainRun:
         return [] if self.executor.ships_data else list(self.previews)
 
     def _scan_key(self, i: int) -> str:
-        return link_key(self.hashes[i], "", self.cfg_text)
+        return link_key(self.hash(i), "", self.cfg_text)
 
     def register(self, jobs: list[LinkJob]) -> None:
         """Register every link not finished yet; each is saved as soon as it is done."""
@@ -224,10 +231,9 @@ class _Step:
     planned: list[PlannedLink] = field(default_factory=list)
 
     def __call__(self, planned: Sequence[PlannedLink], guesses: dict | None = None) -> None:
-        jobs = self.run.jobs(planned, guesses)
         if self.resume:
-            self.run.reuse(jobs)
-        self.run.prepare(jobs)
+            self.run.reuse(self.run.jobs(planned, guesses))
+        self.run.prepare(planned)
         self.planned += list(planned)
 
 
