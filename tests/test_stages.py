@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 from ndt_cli.config import Config, RefineConfig
 from ndt_cli.core.transforms import transform_errors
 from ndt_cli.ndt.backend import NUMBA, NUMPY
-from ndt_cli.ndt.coarse_to_fine import best_per_owner, fit_weighted, level_starts, restart_offsets
+from ndt_cli.ndt.coarse_to_fine import fit_weighted
 from ndt_cli.ndt.kernels import MATCHED, NACC, SCORE
 from ndt_cli.ndt.prepare import load_and_prepare
 from ndt_cli.ndt.quality import weakest_direction
@@ -132,23 +132,6 @@ def test_distinct_indices_merges_near_poses_and_keeps_the_best_first():
     assert picked.tolist() == [1, 3, 2]
     assert distinct_indices(params, scores, k=2, cell=2.0).tolist() == [1, 3]
     assert distinct_indices(params, np.zeros(5), k=3, cell=2.0).tolist() == [0]  # best kept
-
-
-def test_only_the_best_candidates_restart_and_each_keeps_its_best_start():
-    rng = np.random.default_rng(2)
-    cands = rng.normal(size=(5, 3))
-    off = restart_offsets(5.0, True)
-    starts, owner = level_starts(cands, off)  # all restart: the old (candidate, offset) grid
-    assert np.array_equal(starts, (cands[:, None, :] + off[None]).reshape(-1, 3))
-    score = rng.integers(0, 4, len(starts)).astype(float)  # ties: the first start wins
-    ref = np.arange(5) * len(off) + np.argmax(score.reshape(5, len(off)), axis=1)
-    assert np.array_equal(best_per_owner(score, owner, 5), ref)
-    starts, owner = level_starts(cands, off, best=2)
-    assert len(starts) == 2 * len(off) + 3
-    assert np.array_equal(starts[2 * len(off) :], cands[2:])  # the rest from their own pose
-    assert np.array_equal(np.bincount(owner), [len(off), len(off), 1, 1, 1])
-    pick = best_per_owner(np.arange(len(starts), dtype=float), owner, 5)
-    assert np.array_equal(owner[pick], np.arange(5)) and pick[-1] == len(starts) - 1
 
 
 def test_fit_weighted_prefers_the_better_fit_over_more_matches():

@@ -42,7 +42,6 @@ RANGES: dict[str, tuple[float | None, float | None]] = {
     "search.bnb_resolution": (0.1, 10.0),
     "search.bnb_window": (1.0, 500.0),
     "search.bnb_candidates": (2, 64),
-    "search.bnb_restarts": (1, 64),
     "search.bnb_start_cell": (0.5, 100.0),
     "search.fallback_ratio": (0.5, 1.0),
     "refine.voxel": (0.01, 5.0),

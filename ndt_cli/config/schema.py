@@ -156,12 +156,6 @@ class SearchConfig:
         "ambiguous scene, or scans far apart), the start search runs too and its candidates "
         "join; on simulated links this kept far links as reliable as the start search alone",
     )
-    bnb_restarts: int = key(
-        2,
-        "bnb: when the search is not ambiguous (see fallback_ratio), only its best this many "
-        "poses restart from the offsets at the first refinement level, the others start from "
-        "their own pose; on simulated links all 120 street links stayed right with 1 to 3",
-    )
     yaw_starts: int = key(12, "starts: headings over 360 degrees")
     translation_range: float = key(
         40.0, "starts: translations cover +-this around the aligned slice centroids (m)"

@@ -74,24 +74,6 @@ class Refined:
     converged: bool
 
 
-def level_starts(
-    candidates: np.ndarray, offsets: np.ndarray, best: int | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Starts (S,3) of a level and the candidate each belongs to (S,): the first ``best``
-    candidates (None: all) plus each of the ``offsets``, the others from their own pose."""
-    k = len(candidates)
-    m = k if best is None else min(best, k)
-    starts = np.vstack([(candidates[:m, None, :] + offsets[None]).reshape(-1, 3), candidates[m:]])
-    owner = np.concatenate([np.repeat(np.arange(m), len(offsets)), np.arange(m, k)])
-    return starts, owner
-
-
-def best_per_owner(score: np.ndarray, owner: np.ndarray, n: int) -> np.ndarray:
-    """Index of the best-scoring start of each of ``n`` candidates (the first on ties)."""
-    order = np.lexsort((-score, owner))  # by candidate, then score descending; stable
-    return order[np.searchsorted(owner[order], np.arange(n))]
-
-
 def coarse_to_fine(
     candidates: np.ndarray,
     schedule: Sequence[float],
@@ -100,11 +82,9 @@ def coarse_to_fine(
     optimizer: OptimizerConfig,
     restarts: bool | Sequence[bool],
     kernels: Kernels,
-    restart_best: int | None = None,
 ) -> Refined:
     """Refine every candidate pose through the cell sizes of ``schedule`` (coarse to fine);
-    ``restarts``: restart from the offsets at every level, or per level; ``restart_best``:
-    only that many candidates (the first, best first) restart (None: all)."""
+    ``restarts``: restart from the offsets at every level, or per level."""
     cands = candidates
     scores, evidence = np.zeros(len(cands)), np.zeros(len(cands))
     levels: list[LevelStats] = []
@@ -112,10 +92,12 @@ def coarse_to_fine(
     per_level = [restarts] * len(schedule) if isinstance(restarts, bool) else list(restarts)
     for k, cell in enumerate(schedule):
         t0 = time.perf_counter()
-        starts, owner = level_starts(cands, restart_offsets(cell, per_level[k]), restart_best)
+        off = restart_offsets(cell, per_level[k])
+        starts = (cands[:, None, :] + off[None, :, :]).reshape(-1, 3)
         pts = sampler.at(cell)
         res = run_level(maps(cell), pts, starts, optimizer, kernels)
-        flat = best_per_owner(res.score, owner, len(cands))
+        pick = np.argmax(res.score.reshape(len(cands), len(off)), axis=1)
+        flat = np.arange(len(cands)) * len(off) + pick
         cands, scores = res.params[flat], res.score[flat]
         if k >= len(schedule) - EVIDENCE_LEVELS:
             evidence += fit_weighted(kernels.accumulate(maps(cell), pts, cands, True))

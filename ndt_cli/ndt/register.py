@@ -41,15 +41,13 @@ from ndt_cli.ndt.search import global_start, start_search
 
 @dataclass(frozen=True)
 class _Start:
-    """Candidate poses (reduced frames), the search's level records, the refinement schedule,
-    whether each of its levels restarts from the offsets, and how many candidates (best first)
-    restart (None: all)."""
+    """Candidate poses (reduced frames), the search's level records, the refinement schedule
+    and whether each of its levels restarts from the offsets."""
 
     candidates: np.ndarray
     levels: list[LevelStats]
     schedule: tuple[float, ...]
     restarts: tuple[bool, ...]
-    restart_best: int | None = None
 
 
 def _starts(
@@ -96,7 +94,7 @@ def _search(
         if len(found.candidates) and found.ratio < s.fallback_ratio:
             schedule = tuple(c for c in cells if c <= s.bnb_start_cell) or (min(cells),)
             flags = (s.refine_offsets,) + (False,) * (len(schedule) - 1)
-            return _Start(found.candidates, stages, schedule, flags, s.bnb_restarts)
+            return _Start(found.candidates, stages, schedule, flags)
     grid = start_search(target, source, maps, sampler, cells[0], s, cfg.optimizer, kernels)
     stages.append(grid.level)
     candidates.append(grid.candidates)
@@ -159,14 +157,7 @@ def register_prepared(
     schedule = with_verification(start.schedule)
     restarts = start.restarts + (start.restarts[-1],) * (len(schedule) - len(start.restarts))
     refined = coarse_to_fine(
-        start.candidates,
-        schedule,
-        maps,
-        sampler,
-        cfg.optimizer,
-        restarts,
-        kernels,
-        start.restart_best,
+        start.candidates, schedule, maps, sampler, cfg.optimizer, restarts, kernels
     )
     ranked = rank(refined, schedule[-1])
     gate_map, gate_points = gate_inputs(
