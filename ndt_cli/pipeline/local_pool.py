@@ -37,6 +37,13 @@ def start_method() -> str:
     """
     if sys.platform != "linux" or threading.active_count() > 1:
         return "spawn"
+    numba = sys.modules.get("numba")
+    if numba is not None:
+        try:
+            numba.threading_layer()  # raises ValueError until a parallel kernel has run
+            return "spawn"
+        except ValueError:
+            pass
     try:
         threads = len(os.listdir("/proc/self/task"))
     except OSError:
