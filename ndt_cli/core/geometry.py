@@ -75,10 +75,19 @@ def voxel_thin(points: np.ndarray, voxel: float) -> np.ndarray:
     return thinner.result()
 
 
+def query_threads() -> int:
+    """Threads of a k-d tree query: this process's Numba thread budget, which a chain's worker
+    sets to its share of the cores (all cores by default), so that parallel workers do not each
+    start a thread per core."""
+    import numba
+
+    return int(numba.get_num_threads())
+
+
 def normals(points: np.ndarray, tree: cKDTree, k: int = 12) -> tuple[np.ndarray, np.ndarray]:
     """Unit normals from the covariance of each point's ``k`` neighbours, and a planarity in
     [0, 1] (1 - smallest/middle eigenvalue) to drop points without a clear plane."""
-    _, idx = tree.query(points, k=k, workers=-1)
+    _, idx = tree.query(points, k=k, workers=query_threads())
     nb = np.asarray(tree.data)[idx]
     d = nb - nb.mean(axis=1, keepdims=True)
     cov = np.einsum("nki,nkj->nij", d, d) / k

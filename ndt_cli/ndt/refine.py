@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ndt_cli.config.schema import RefineConfig
-from ndt_cli.core.geometry import normals, voxel_thin
+from ndt_cli.core.geometry import normals, query_threads, voxel_thin
 from ndt_cli.core.transforms import transform_errors, translation
 
 _MIN_PLANARITY = 0.7  # target points whose neighbourhood is not clearly planar are not used
@@ -75,6 +75,7 @@ def icp(
     src = source if voxel is None else voxel_thin(source, voxel)
     src = src[:: max(1, len(src) // max_source_points)]  # a regular stride: deterministic
     tree = cKDTree(tgt, balanced_tree=False, compact_nodes=False)  # builds in half the time
+    threads = query_threads()
     n = np.zeros((len(tgt), 3))
     planarity = np.full(len(tgt), np.nan)  # NaN: not computed yet
     T = np.array(T0, dtype=float)
@@ -85,7 +86,7 @@ def icp(
     pi = ni = w = np.zeros((0, 3))
     for it in range(1, iterations + 1):  # noqa: B007
         p = src @ T[:3, :3].T + T[:3, 3]
-        d, j = tree.query(p, distance_upper_bound=dist, workers=-1)
+        d, j = tree.query(p, distance_upper_bound=dist, workers=threads)
         ok = np.isfinite(d)
         need = np.unique(j[ok][np.isnan(planarity[j[ok]])])
         if len(need):
@@ -117,7 +118,7 @@ def icp(
         J = np.column_stack([np.cross(pi - centroid, ni), ni])
         H = (J * w[:, None]).T @ J
     d, _ = tree.query(
-        src @ T[:3, :3].T + T[:3, 3], distance_upper_bound=overlap_distance, workers=-1
+        src @ T[:3, :3].T + T[:3, 3], distance_upper_bound=overlap_distance, workers=threads
     )
     return IcpResult(T, rms, inliers, it, H, float(np.isfinite(d).mean()), centroid)
 
