@@ -117,9 +117,15 @@ class Ranked:
 
     @property
     def ambiguity(self) -> float:
-        """Evidence of the second distinct candidate over the best's (0 when alone)."""
-        e = self.evidence
-        return float(e[1] / e[0]) if len(e) > 1 and e[0] > 0 else 0.0
+        """Evidence of the second distinct candidate over the best's (0 when alone); after
+        :meth:`promote` the smaller of the first two over the larger."""
+        e = np.sort(self.evidence[:2])
+        return float(e[0] / e[1]) if len(e) > 1 and e[1] > 0 else 0.0
+
+    def promote(self, k: int) -> Ranked:
+        """The same candidates with the ``k``-th first (another check preferred it)."""
+        order = [k, *(i for i in range(len(self.poses)) if i != k)]
+        return Ranked(self.poses[order], self.scores[order], self.evidence[order])
 
     def records(self) -> tuple[Candidate, ...]:
         return tuple(

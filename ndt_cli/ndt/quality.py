@@ -3,10 +3,11 @@
 A converged result is ``degenerate`` when the smaller over the larger eigenvalue of the NDT
 Hessian's translation block, or of ICP's translation information once rotation is free, is below
 ``quality.min_constraint_ratio``; it is ``suspect`` when its score per point, overlap or
-ambiguity misses the thresholds of ``quality``, or when ICP moved the pose to where the slices
-fit clearly worse. Every measure is taken on 1 m cells built with the default grid settings
-(:func:`~ndt_cli.ndt.levels.gate_inputs`), whatever the configuration. The order of
-precedence: ``no_overlap``, ``not_converged``, ``degenerate``, ``suspect``, ``ok``.
+ambiguity misses the thresholds of ``quality``, when ICP moved the pose to where the slices
+fit clearly worse, or when the free-space check kept a pose other than the one of most evidence
+(:mod:`ndt_cli.ndt.visibility`). Every measure is taken on 1 m cells built with the default
+grid settings (:func:`~ndt_cli.ndt.levels.gate_inputs`), whatever the configuration. The order
+of precedence: ``no_overlap``, ``not_converged``, ``degenerate``, ``suspect``, ``ok``.
 """
 
 from __future__ import annotations
@@ -118,10 +119,13 @@ def judge(
     level: np.ndarray,
     q: QualityConfig,
     after: Fit | None = None,
+    picked: str = "",
 ) -> Verdict:
     """The verdict on a registration, in the order of precedence of the module docstring.
-    ``after``: the fit of the pose after ICP (same map and points as ``fit``), if ICP ran."""
+    ``after``: the fit of the pose after ICP (same map and points as ``fit``), if ICP ran;
+    ``picked``: why the pose is not the one of most evidence ('' when it is)."""
     warnings, weak = ndt_warnings(fit, q)
+    warnings += [picked] if picked else []
     more, weak_icp = icp_warnings(refined, level, q)
     warnings += more
     if after is not None and not refined.rejected and after.score < ICP_KEEPS * fit.score:

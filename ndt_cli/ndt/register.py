@@ -10,7 +10,9 @@
    finer cell sizes (from ``search.bnb_start_cell`` after the global search), with restarts
    from +-1/2 and +-1 cell offsets at the first of them (after the global search) or at each.
 3. **Winner by evidence**: fit-weighted scores over the three finest levels; the second
-   distinct candidate's share is the ambiguity.
+   distinct candidate's share is the ambiguity. The second replaces the first when the first
+   puts clearly more points into the space the other scanner saw to be empty
+   (:mod:`ndt_cli.ndt.visibility`); the link is then suspect.
 4. **Quality metrics** of the winner at the finest cell (:mod:`ndt_cli.ndt.quality`).
 5. **Refinement**: robust point-to-plane ICP in full 6-DOF (:mod:`ndt_cli.ndt.refine`).
 6. **Status** from the gate's thresholds and the degeneracy of both Hessians.
@@ -27,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ndt_cli.config.schema import Config
+from ndt_cli.config.schema import Config, SearchConfig
 from ndt_cli.core.transforms import pose2d_matrix, yaw_of
 from ndt_cli.ndt.backend import NUMBA, Kernels
 from ndt_cli.ndt.coarse_to_fine import Ranked, coarse_to_fine, rank, with_verification
@@ -37,6 +39,7 @@ from ndt_cli.ndt.quality import Fit, Verdict, judge, measure_fit
 from ndt_cli.ndt.refine import Refinement, refine_pose
 from ndt_cli.ndt.result import LevelStats, RegistrationResult
 from ndt_cli.ndt.search import global_start, start_search
+from ndt_cli.ndt.visibility import Sight, free_space_share, prefer, scanner_inside
 
 
 @dataclass(frozen=True)
@@ -126,6 +129,41 @@ def _refine(
     )
 
 
+def _sight(scan: PreparedScan) -> Sight | None:
+    """The scan's part in the free-space check; None without 3D points or when the scan does
+    not surround its frame's origin (not in its scanner's frame)."""
+    if scan.points3d is None or len(scan.points3d) < 100:
+        return None
+    points = scan.points3d + scan.reduction
+    if not scanner_inside(points):
+        return None
+    return Sight.of(points, (scan.points3d @ scan.level.T)[:, 2])
+
+
+def _free_space(
+    ranked: Ranked, target: PreparedScan, source: PreparedScan, s: SearchConfig
+) -> tuple[Ranked, str]:
+    """The candidates, the second first when the best contradicts what the scanners saw
+    (:mod:`ndt_cli.ndt.visibility`), and the warning that says so ('' when kept)."""
+    if len(ranked.poses) < 2 or s.free_space_ratio <= 0.0:
+        return ranked, ""
+    sights = _sight(target), _sight(source)
+    if sights[0] is None or sights[1] is None:
+        return ranked, ""
+    shares = np.array(
+        [
+            free_space_share(*sights, target.from_local() @ pose2d_matrix(*p) @ source.to_local())
+            for p in ranked.poses[:2]
+        ]
+    )
+    if prefer(shares, s.free_space_ratio, s.free_space_share) == 0:
+        return ranked, ""
+    return ranked.promote(1), (
+        f"free space: the pose of most evidence put {shares[0]:.0%} of the points where the "
+        f"other scanner saw nothing, the second pose {shares[1]:.0%}; the second is kept"
+    )
+
+
 @dataclass(frozen=True)
 class _Stages:
     """What the stages found, as the result needs it."""
@@ -159,7 +197,7 @@ def register_prepared(
     refined = coarse_to_fine(
         start.candidates, schedule, maps, sampler, cfg.optimizer, restarts, kernels
     )
-    ranked = rank(refined, schedule[-1])
+    ranked, picked = _free_space(rank(refined, schedule[-1]), target, source, cfg.search)
     gate_map, gate_points = gate_inputs(
         maps, sampler, target.slices, source.slices, cfg.grid, cfg.source
     )
@@ -169,7 +207,7 @@ def register_prepared(
     refinement = _refine(target, source, T, fit.score > 0.0 and refined.converged, cfg)
     moved = _planar(target, source, refinement.T) if refinement.icp is not None else None
     after = None if moved is None else measure_fit(gate_map, gate_points, moved, 0.0, kernels)
-    verdict = judge(fit, refined.converged, refinement, target.level, cfg.quality, after)
+    verdict = judge(fit, refined.converged, refinement, target.level, cfg.quality, after, picked)
     per_slice = tuple(int(n) for n in sampler.fine.per_slice(len(source.slices)))
     stages = _Stages(
         (*start.levels, *refined.levels),

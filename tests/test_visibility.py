@@ -1,0 +1,137 @@
+"""The free-space check: what a scanner saw to be empty, and the pose it prefers. Expected values
+come from geometry built by hand and from the simulator's true poses."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ndt_cli import sim
+from ndt_cli.config import Config
+from ndt_cli.core.transforms import transform_errors
+from ndt_cli.ndt.coarse_to_fine import Ranked
+from ndt_cli.ndt.prepare import prepare
+from ndt_cli.ndt.register import register_prepared
+from ndt_cli.ndt.visibility import (
+    MARGIN,
+    RangeImage,
+    Sight,
+    free_space_share,
+    prefer,
+    scanner_inside,
+)
+
+
+def _room(half: float = 5.0, n: int = 200) -> np.ndarray:
+    """Points on the four walls (0 to 3 m high) of a square room around the scanner."""
+    rng = np.random.default_rng(0)
+    s, z = rng.uniform(-half, half, 4 * n * n), rng.uniform(0.0, 3.0, 4 * n * n)
+    side = np.repeat(np.arange(4), n * n)
+    x = np.where(side == 0, half, np.where(side == 1, -half, s))
+    y = np.where(side == 2, half, np.where(side == 3, -half, s))
+    return np.column_stack([x, y, z])
+
+
+def test_a_point_in_front_of_a_wall_conflicts_one_behind_it_or_unseen_does_not():
+    img = RangeImage.of(_room())
+    inside = np.array([[2.0, 0.3, 1.0], [-1.0, -3.0, 1.0]])  # well inside the 5 m room
+    at_wall = np.array([[5.0 - 0.8 * MARGIN, 1.0, 1.5]])  # within the margin of the wall
+    behind = np.array([[8.0, 0.5, 1.0], [-0.5, -9.0, 1.0]])  # beyond a wall: not seen there
+    unseen = np.array([[0.5, 0.5, -3.0]])  # straight down: the room has no floor
+    assert img.conflicts(inside) == (2, 2)
+    assert img.conflicts(at_wall) == (0, 1)
+    assert img.conflicts(behind) == (0, 2)
+    assert img.conflicts(unseen) == (0, 0)
+
+
+def test_the_share_is_symmetric_in_frames_and_zero_for_the_true_pose():
+    room = _room()
+    T = np.eye(4)  # the second scanner stands 1 m east, turned by 90 degrees
+    T[:2, :2] = [[0.0, -1.0], [1.0, 0.0]]
+    T[:3, 3] = [1.0, 0.0, 0.0]
+    second = (room - T[:3, 3]) @ T[:3, :3]  # the same walls in the second scanner's frame
+    high = np.full(len(room), 2.0)
+    a, b = Sight.of(room, high), Sight.of(second, high)
+    assert free_space_share(a, b, T) == pytest.approx(0.0, abs=1e-3)
+    wrong = T.copy()
+    wrong[:3, 3] = [-3.0, 0.0, 0.0]  # 4 m off: a wall of the second scan lands inside the room
+    assert free_space_share(a, b, wrong) > 0.1
+    assert free_space_share(b, a, np.linalg.inv(wrong)) == pytest.approx(
+        free_space_share(a, b, wrong)
+    )
+
+
+def test_only_points_above_the_ground_are_checked():
+    room = _room()
+    sight = Sight.of(room, room[:, 2] - 1.0)  # heights: 1 m below the scanner is the ground
+    assert sight.checked[:, 2].min() > 1.5
+    assert len(sight.image.ranges) == 360 * 120
+
+
+def test_the_origin_must_lie_inside_the_scan():
+    room = _room()
+    assert scanner_inside(room)
+    assert not scanner_inside(room + np.array([500_000.0, 5_400_000.0, 0.0]))  # georeferenced
+
+
+@pytest.mark.parametrize(
+    ("shares", "ratio", "floor", "kept"),
+    [
+        ([0.24, 0.04], 2.0, 0.08, 1),
+        ([0.24, 0.13], 2.0, 0.08, 0),  # not twice the second's
+        ([0.06, 0.02], 2.0, 0.08, 0),  # below the floor: both are plausible
+        ([0.24, 0.04], 0.0, 0.08, 0),  # switched off
+        ([0.24], 2.0, 0.08, 0),  # alone
+    ],
+)
+def test_the_second_pose_is_kept_only_when_the_first_clearly_conflicts(shares, ratio, floor, kept):
+    assert prefer(np.array(shares), ratio, floor) == kept
+
+
+def test_promoting_a_candidate_keeps_the_ambiguity_below_one():
+    ranked = Ranked(np.arange(9.0).reshape(3, 3), np.array([5.0, 4.0, 1.0]), np.array([3, 2.7, 1]))
+    second = ranked.promote(1)
+    assert second.poses[0].tolist() == [3.0, 4.0, 5.0]
+    assert second.evidence.tolist() == [2.7, 3.0, 1.0]
+    assert second.ambiguity == pytest.approx(ranked.ambiguity) == pytest.approx(0.9)
+
+
+@pytest.fixture(scope="module")
+def far_link():
+    """Scans 1 and 3 of a simulated street (38-48 m apart): NDT's evidence ranks a pose turned
+    by 180 degrees first, the true pose second."""
+    _, scans, poses = sim.make_sequence(
+        seed=101, n_scans=4, spacing=(17.0, 24.0), scan_kwargs={"n_azimuth": 1000}
+    )
+    truth = np.linalg.inv(poses[1]) @ poses[3]
+    return scans[1], scans[3], truth
+
+
+def _register(target: np.ndarray, source: np.ndarray, cfg: Config):
+    return register_prepared(prepare(target, cfg), prepare(source, cfg), cfg)
+
+
+def _right(T: np.ndarray, truth: np.ndarray) -> bool:
+    rot, trans = transform_errors(T, truth)
+    return rot < 0.3 and trans < 0.15
+
+
+@pytest.mark.slow
+def test_free_space_corrects_a_far_link_that_evidence_gets_wrong(far_link):
+    target, source, truth = far_link
+    off = _register(target, source, Config().replace(search={"free_space_ratio": 0.0}))
+    assert not _right(off.T_target_source, truth)  # the case the check is for
+    on = _register(target, source, Config())
+    assert _right(on.T_target_source, truth)
+    assert on.status.value == "suspect"
+    assert any(w.startswith("free space: ") for w in on.warnings)
+    offset = np.array([500_000.0, 5_400_000.0, 100.0])  # georeferenced: nothing to check
+    geo = _register(target + offset, source + offset, Config())
+    assert not any(w.startswith("free space") for w in geo.warnings)
+    assert not _right(np.linalg.inv(_shift(offset)) @ geo.T_target_source @ _shift(offset), truth)
+
+
+def _shift(offset: np.ndarray) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = offset
+    return T
