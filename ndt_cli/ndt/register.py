@@ -159,8 +159,8 @@ def _free_space(
     if prefer(shares, s.free_space_ratio, s.free_space_share) == 0:
         return ranked, ""
     return ranked.promote(1), (
-        f"free space: the pose of most evidence put {shares[0]:.0%} of the points where the "
-        f"other scanner saw nothing, the second pose {shares[1]:.0%}; the second is kept"
+        f"free space: the pose of most evidence puts {shares[0]:.0%} of the points into space "
+        f"the other scanner saw empty, the second pose {shares[1]:.0%}; the second is kept"
     )
 
 

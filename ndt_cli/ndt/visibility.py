@@ -6,15 +6,17 @@ into that empty space is wrong however well the slices fit; the typical case is 
 matched onto itself turned by 180 degrees or shifted by a block, which NDT's evidence can rank
 as high as the truth when the scanners stand far apart.
 
-Each scan is summarised once as a :class:`RangeImage`: the nearest range (m) per direction bin
-of 1 x 1.5 degrees (azimuth x elevation), the scanner at the origin of the scan's frame, as
-``input.min_range`` and ``input.max_range`` assume too. A point conflicts when it lies more than
-:data:`MARGIN` in front of the nearest surface seen in its direction. Only points more than
-:data:`MIN_HEIGHT` above the ground are checked: ground seen at grazing angles spreads over
-neighbouring elevation bins and would conflict with a right pose too.
+Each scan's 3D points thinned for ICP are summarised as a :class:`RangeImage`: the nearest
+range (m) per direction bin of 1 x 1.5 degrees (azimuth x elevation), the scanner at the origin
+of the scan's frame, as ``input.min_range`` and ``input.max_range`` assume too. A point
+conflicts when it lies more than :data:`MARGIN` in front of the nearest surface seen in its
+direction. Only points more than :data:`MIN_HEIGHT` above the ground are checked: ground seen
+at grazing angles spreads over neighbouring elevation bins and would conflict with a right
+pose too.
 
 On simulated streets a right pose puts 1-6 % of the checked points into free space (occlusion
-edges, the bins' width); the wrong poses NDT ranked first or second put 10-39 % there.
+edges, the bins' width), the wrong poses NDT ranked first or second 10-39 %; on real pairs
+(Velodyne street and car scans) right poses put 0.4-11 % there and the runners-up 30-51 %.
 """
 
 from __future__ import annotations
