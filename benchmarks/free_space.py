@@ -13,7 +13,6 @@ link whose outcome differs.
 
 from __future__ import annotations
 
-import argparse
 import os
 import pickle
 import sys
@@ -26,6 +25,7 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
+from benchmarks.search_sweep import link_counts  # noqa: E402
 from ndt_cli import sim  # noqa: E402
 from ndt_cli.config import Config  # noqa: E402
 from ndt_cli.core.transforms import transform_errors  # noqa: E402
@@ -76,12 +76,7 @@ def run(target, source, truth: np.ndarray, cfg: Config) -> tuple[bool, str, bool
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--street", type=int, default=24, help="sequences of 6 scans (5 links each)")
-    ap.add_argument("--far", type=int, default=10, help="sequences of 4 scans (2 far links each)")
-    ap.add_argument("--corridor", type=int, default=5)
-    args = ap.parse_args()
-    todo = links(args.street, args.far, args.corridor)
+    todo = links(*link_counts())
     register_prepared(todo[0][2][0], todo[0][2][1], Config())  # compile
     rows = {name: [run(*lk, cfg) for _, _, lk in todo] for name, cfg in SETTINGS.items()}
     for kind in ("street", "far", "corridor"):

@@ -11,7 +11,6 @@ and the median time per link and over the ``starts`` method's time of the same l
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time
@@ -23,7 +22,7 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from benchmarks.search_sweep import errors, make_links  # noqa: E402
+from benchmarks.search_sweep import errors, link_counts, make_links  # noqa: E402
 from ndt_cli.config import Config  # noqa: E402
 from ndt_cli.core.transforms import yaw_of  # noqa: E402
 from ndt_cli.ndt.register import register_prepared  # noqa: E402
@@ -48,12 +47,7 @@ def run(link, search: dict) -> tuple[bool, bool, float]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--street", type=int, default=24, help="sequences of 6 scans (5 links each)")
-    ap.add_argument("--far", type=int, default=10, help="sequences of 4 scans (2 far links each)")
-    ap.add_argument("--corridor", type=int, default=5)
-    args = ap.parse_args()
-    links = make_links(args.street, args.far, args.corridor)
+    links = make_links(*link_counts())
     register_prepared(links[0].target, links[0].source, Config())  # compile
     rows = {name: [run(link, v) for link in links] for name, v in VARIANTS.items()}
     base = np.array([t for _, _, t in rows["starts"]])

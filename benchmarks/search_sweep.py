@@ -95,6 +95,17 @@ def _link(kind: str, seed: int, seq: tuple, i: int, j: int) -> Link:
     return Link(kind, f"{kind} s{seed} {i}-{j}", t, s, truth, dist)
 
 
+def link_counts() -> tuple[int, int, int]:
+    """Street, far and corridor sequences asked on the command line (--street, --far,
+    --corridor)."""
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--street", type=int, default=24, help="sequences of 6 scans (5 links each)")
+    ap.add_argument("--far", type=int, default=10, help="sequences of 4 scans (2 far links each)")
+    ap.add_argument("--corridor", type=int, default=5)
+    args = ap.parse_args()
+    return args.street, args.far, args.corridor
+
+
 def make_links(n_street: int, n_far: int, n_corr: int) -> list[Link]:
     out = []
     for seed in range(n_street):
