@@ -29,7 +29,7 @@ from benchmarks.search_sweep import link_counts  # noqa: E402
 from ndt_cli import sim  # noqa: E402
 from ndt_cli.config import Config  # noqa: E402
 from ndt_cli.core.transforms import transform_errors  # noqa: E402
-from ndt_cli.ndt.prepare import prepare  # noqa: E402
+from ndt_cli.ndt.prepare import PreparedScan, prepare  # noqa: E402
 from ndt_cli.ndt.register import register_prepared  # noqa: E402
 
 CACHE = ROOT / "benchmarks" / ".cache" / "free_space"
@@ -37,7 +37,9 @@ RIGHT_DEG, RIGHT_M = 0.3, 0.15
 SETTINGS = {"on": Config(), "off": Config().replace(search={"free_space_ratio": 0.0})}
 
 
-def _sequence(seed: int, n: int, spacing: tuple[float, float], corridor: bool) -> tuple:
+def _sequence(
+    seed: int, n: int, spacing: tuple[float, float], corridor: bool
+) -> tuple[list[PreparedScan], list[np.ndarray]]:
     """Prepared scans (with their 3D points) and true poses of one sequence, cached."""
     path = CACHE / f"seq_{seed}_{n}_{spacing[0]:g}_{spacing[1]:g}_{int(corridor)}.pkl"
     if path.exists():
@@ -51,7 +53,10 @@ def _sequence(seed: int, n: int, spacing: tuple[float, float], corridor: bool) -
     return out
 
 
-def links(n_street: int, n_far: int, n_corridor: int) -> list[tuple[str, str, tuple]]:
+Link = tuple[PreparedScan, PreparedScan, np.ndarray]  # target, source, true T_target_source
+
+
+def links(n_street: int, n_far: int, n_corridor: int) -> list[tuple[str, str, Link]]:
     """(kind, name, (target, source, T_true)) of every link."""
     plan = [("street", s, 6, (12.0, 30.0), False, 1) for s in range(n_street)]
     plan += [("far", s, 4, (17.0, 24.0), False, 2) for s in range(100, 100 + n_far)]
@@ -65,7 +70,9 @@ def links(n_street: int, n_far: int, n_corridor: int) -> list[tuple[str, str, tu
     return out
 
 
-def run(target, source, truth: np.ndarray, cfg: Config) -> tuple[bool, str, bool, float]:
+def run(
+    target: PreparedScan, source: PreparedScan, truth: np.ndarray, cfg: Config
+) -> tuple[bool, str, bool, float]:
     """(right, status, second pose kept, seconds) of one registration."""
     t0 = time.perf_counter()
     r = register_prepared(target, source, cfg)

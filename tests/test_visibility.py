@@ -9,14 +9,17 @@ import pytest
 from ndt_cli import sim
 from ndt_cli.config import Config
 from ndt_cli.core.transforms import transform_errors
+from ndt_cli.errors import ConfigError
 from ndt_cli.ndt.coarse_to_fine import Ranked
 from ndt_cli.ndt.prepare import prepare
 from ndt_cli.ndt.register import register_prepared
+from ndt_cli.ndt.result import RegistrationResult
 from ndt_cli.ndt.visibility import (
     MARGIN,
     RangeImage,
     Sight,
     free_space_share,
+    margin,
     prefer,
     scanner_inside,
 )
@@ -42,6 +45,9 @@ def test_a_point_in_front_of_a_wall_conflicts_one_behind_it_or_unseen_does_not()
     assert img.conflicts(at_wall) == (0, 1)
     assert img.conflicts(behind) == (0, 2)
     assert img.conflicts(unseen) == (0, 0)
+    near = np.array([[5.0 - 0.8, 1.0, 1.5]])  # 0.8 m in front of the wall
+    assert img.conflicts(near, margin(0.1)) == (1, 1)
+    assert img.conflicts(near, margin(1.0)) == (0, 1)  # coarse thinning: a wider margin
 
 
 def test_the_share_is_symmetric_in_frames_and_zero_for_the_true_pose():
@@ -82,6 +88,9 @@ def test_the_origin_must_lie_inside_the_scan():
         ([0.06, 0.02], 2.0, 0.08, 0),  # below the floor: both are plausible
         ([0.24, 0.04], 0.0, 0.08, 0),  # switched off
         ([0.24], 2.0, 0.08, 0),  # alone
+        ([0.16, 0.08], 2.0, 0.08, 0),  # exactly twice: not more
+        ([0.08, 0.01], 2.0, 0.08, 1),  # exactly at the floor
+        ([0.0, 0.0], 1.0, 0.0, 0),  # nothing in free space: a tie keeps the first
     ],
 )
 def test_the_second_pose_is_kept_only_when_the_first_clearly_conflicts(shares, ratio, floor, kept):
@@ -89,11 +98,23 @@ def test_the_second_pose_is_kept_only_when_the_first_clearly_conflicts(shares, r
 
 
 def test_promoting_a_candidate_keeps_the_ambiguity_below_one():
-    ranked = Ranked(np.arange(9.0).reshape(3, 3), np.array([5.0, 4.0, 1.0]), np.array([3, 2.7, 1]))
+    ranked = Ranked(
+        np.arange(9.0).reshape(3, 3),
+        np.array([5.0, 4.0, 1.0]),
+        np.array([3, 2.7, 1]),
+        np.array([True, False, True]),
+    )
     second = ranked.promote(1)
     assert second.poses[0].tolist() == [3.0, 4.0, 5.0]
     assert second.evidence.tolist() == [2.7, 3.0, 1.0]
+    assert second.converged.tolist() == [False, True, True]
     assert second.ambiguity == pytest.approx(ranked.ambiguity) == pytest.approx(0.9)
+
+
+@pytest.mark.parametrize("ratio", [0.5, 0.999])
+def test_a_ratio_between_zero_and_one_is_refused_by_name(ratio):
+    with pytest.raises(ConfigError, match=r"'search\.free_space_ratio'"):
+        Config().replace(search={"free_space_ratio": ratio})
 
 
 @pytest.fixture(scope="module")
@@ -107,7 +128,7 @@ def far_link():
     return scans[1], scans[3], truth
 
 
-def _register(target: np.ndarray, source: np.ndarray, cfg: Config):
+def _register(target: np.ndarray, source: np.ndarray, cfg: Config) -> RegistrationResult:
     return register_prepared(prepare(target, cfg), prepare(source, cfg), cfg)
 
 
@@ -120,15 +141,22 @@ def _right(T: np.ndarray, truth: np.ndarray) -> bool:
 def test_free_space_corrects_a_far_link_that_evidence_gets_wrong(far_link):
     target, source, truth = far_link
     off = _register(target, source, Config().replace(search={"free_space_ratio": 0.0}))
-    assert not _right(off.T_target_source, truth)  # the case the check is for
+    assert not _right(off.T_target_source, truth), "NDT alone is right here: pick another link"
     on = _register(target, source, Config())
     assert _right(on.T_target_source, truth)
     assert on.status.value == "suspect"
     assert any(w.startswith("free space: ") for w in on.warnings)
+    first, second = on.candidates[0].evidence, on.candidates[1].evidence
+    assert first < second  # the kept pose is not the one of most evidence
+    assert on.ambiguity == pytest.approx(first / second)
     offset = np.array([500_000.0, 5_400_000.0, 100.0])  # georeferenced: nothing to check
     geo = _register(target + offset, source + offset, Config())
     assert not any(w.startswith("free space") for w in geo.warnings)
-    assert not _right(np.linalg.inv(_shift(offset)) @ geo.T_target_source @ _shift(offset), truth)
+    back = np.linalg.inv(_shift(offset)) @ geo.T_target_source @ _shift(offset)
+    rot, trans = transform_errors(back, off.T_target_source)
+    # the pose of most evidence, as with the check off (the voxels of ICP's thinning fall
+    # differently at large coordinates: centimetres; the right pose is tens of metres away)
+    assert rot < 0.01 and trans < 0.05
 
 
 def _shift(offset: np.ndarray) -> np.ndarray:

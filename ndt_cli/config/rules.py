@@ -109,6 +109,8 @@ def _relations(c: Any) -> None:
     if c.refine.min_distance > c.refine.max_distance:
         raise ConfigError("'refine.min_distance' must not exceed 'refine.max_distance'")
     s = c.search
+    if 0.0 < s.free_space_ratio < 1.0:
+        raise ConfigError("'search.free_space_ratio' must be 0 (no check) or at least 1")
     if s.bnb_window / s.bnb_resolution > 2000:
         raise ConfigError("'search.bnb_window' over 'search.bnb_resolution' must be <= 2000")
     n = int(s.translation_range / s.translation_step + 1e-9)

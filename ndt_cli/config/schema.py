@@ -170,10 +170,11 @@ class SearchConfig:
     )
     free_space_ratio: float = key(
         2.0,
-        "the second distinct pose replaces the best when the best puts at least this many "
-        "times the share of points into the space the other scanner saw to be empty (and at "
-        "least free_space_share); 0: never. Right simulated poses put 1-6 % there, the wrong "
-        "ones NDT ranked first 10-39 %. Needs scans in their scanners' own frames",
+        "the second distinct pose replaces the best when the best puts more than this many "
+        "times (1 or more) the share of points into the space the other scanner saw to be "
+        "empty (and at least free_space_share); 0: never. Right simulated poses put 1-6 % "
+        "there, the wrong ones NDT ranked first 10-39 %. Needs scans in their scanners' own "
+        "frames",
     )
     free_space_share: float = key(
         0.08, "the smallest share of points in free space that makes the best pose give way"

@@ -76,9 +76,9 @@ def voxel_thin(points: np.ndarray, voxel: float) -> np.ndarray:
 
 
 def query_threads() -> int:
-    """Threads of a k-d tree query: this process's Numba thread budget, which a chain's worker
-    sets to its share of the cores (all cores by default), so that parallel workers do not each
-    start a thread per core."""
+    """Threads of a k-d tree query: the calling thread's Numba thread budget (all cores unless
+    set; a chain's worker sets its main thread to its share of the cores), so that parallel
+    workers do not each start a thread per core."""
     import numba
 
     return int(numba.get_num_threads())

@@ -65,13 +65,15 @@ def fit_weighted(acc: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class Refined:
     """Candidates (K,3) after the finest level, their final scores and summed evidence, the
-    level records and whether the winner of the finest level converged."""
+    level records, whether the winner of the finest level converged, and whether each
+    candidate did (K,)."""
 
     candidates: np.ndarray
     scores: np.ndarray
     evidence: np.ndarray
     levels: tuple[LevelStats, ...]
     converged: bool
+    converged_each: np.ndarray
 
 
 def coarse_to_fine(
@@ -88,7 +90,7 @@ def coarse_to_fine(
     cands = candidates
     scores, evidence = np.zeros(len(cands)), np.zeros(len(cands))
     levels: list[LevelStats] = []
-    converged = False
+    converged, each = False, np.zeros(len(cands), dtype=bool)
     per_level = [restarts] * len(schedule) if isinstance(restarts, bool) else list(restarts)
     for k, cell in enumerate(schedule):
         t0 = time.perf_counter()
@@ -102,18 +104,20 @@ def coarse_to_fine(
         if k >= len(schedule) - EVIDENCE_LEVELS:
             evidence += fit_weighted(kernels.accumulate(maps(cell), pts, cands, True))
         w = flat[int(np.argmax(scores))]
-        converged = bool(res.converged[w])
+        converged, each = bool(res.converged[w]), res.converged[flat].astype(bool)
         levels.append(level_stats(cell, res, w, len(starts), len(pts), t0))
-    return Refined(cands, scores, evidence, tuple(levels), converged)
+    return Refined(cands, scores, evidence, tuple(levels), converged, each)
 
 
 @dataclass(frozen=True)
 class Ranked:
-    """Distinct candidates, best evidence first: poses (K,3), scores, evidence."""
+    """Distinct candidates, best evidence first (unless :meth:`promote` put another first):
+    poses (K,3), scores, evidence, and whether each converged at the finest level."""
 
     poses: np.ndarray
     scores: np.ndarray
     evidence: np.ndarray
+    converged: np.ndarray
 
     @property
     def ambiguity(self) -> float:
@@ -125,7 +129,9 @@ class Ranked:
     def promote(self, k: int) -> Ranked:
         """The same candidates with the ``k``-th first (another check preferred it)."""
         order = [k, *(i for i in range(len(self.poses)) if i != k)]
-        return Ranked(self.poses[order], self.scores[order], self.evidence[order])
+        return Ranked(
+            self.poses[order], self.scores[order], self.evidence[order], self.converged[order]
+        )
 
     def records(self) -> tuple[Candidate, ...]:
         return tuple(
@@ -140,4 +146,9 @@ def rank(refined: Refined, finest_cell: float) -> Ranked:
     """The candidates by evidence; those that converged onto the same pose count once."""
     n = len(refined.candidates)
     order = distinct_indices(refined.candidates, refined.evidence, n, finest_cell)
-    return Ranked(refined.candidates[order], refined.scores[order], refined.evidence[order])
+    return Ranked(
+        refined.candidates[order],
+        refined.scores[order],
+        refined.evidence[order],
+        refined.converged_each[order],
+    )

@@ -76,7 +76,8 @@ def ndt_warnings(fit: Fit, q: QualityConfig) -> tuple[list[str], np.ndarray | No
         ),
         (
             fit.ambiguity > q.max_ambiguity,
-            f"ambiguous: second solution has {fit.ambiguity:.2f} of the best's evidence",
+            f"ambiguous: the weaker of the two best solutions has {fit.ambiguity:.2f} of the "
+            "stronger's evidence",
         ),
     ]
     direction = np.array([weak[0], weak[1], 0.0]) if degenerate else None

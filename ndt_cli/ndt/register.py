@@ -12,7 +12,7 @@
 3. **Winner by evidence**: fit-weighted scores over the three finest levels; the second
    distinct candidate's share is the ambiguity. The second replaces the first when the first
    puts clearly more points into the space the other scanner saw to be empty
-   (:mod:`ndt_cli.ndt.visibility`); the link is then suspect.
+   (:mod:`ndt_cli.ndt.visibility`); the link is then at least suspect.
 4. **Quality metrics** of the winner at the finest cell (:mod:`ndt_cli.ndt.quality`).
 5. **Refinement**: robust point-to-plane ICP in full 6-DOF (:mod:`ndt_cli.ndt.refine`).
 6. **Status** from the gate's thresholds and the degeneracy of both Hessians.
@@ -39,7 +39,7 @@ from ndt_cli.ndt.quality import Fit, Verdict, judge, measure_fit
 from ndt_cli.ndt.refine import Refinement, refine_pose
 from ndt_cli.ndt.result import LevelStats, RegistrationResult
 from ndt_cli.ndt.search import global_start, start_search
-from ndt_cli.ndt.visibility import Sight, free_space_share, prefer, scanner_inside
+from ndt_cli.ndt.visibility import Sight, free_space_share, margin, prefer, scanner_inside
 
 
 @dataclass(frozen=True)
@@ -129,10 +129,13 @@ def _refine(
     )
 
 
+_MIN_SIGHT_POINTS = 100  # fewer 3D points say nothing about what a scanner saw
+
+
 def _sight(scan: PreparedScan) -> Sight | None:
     """The scan's part in the free-space check; None without 3D points or when the scan does
     not surround its frame's origin (not in its scanner's frame)."""
-    if scan.points3d is None or len(scan.points3d) < 100:
+    if scan.points3d is None or len(scan.points3d) < _MIN_SIGHT_POINTS:
         return None
     points = scan.points3d + scan.reduction
     if not scanner_inside(points):
@@ -141,18 +144,20 @@ def _sight(scan: PreparedScan) -> Sight | None:
 
 
 def _free_space(
-    ranked: Ranked, target: PreparedScan, source: PreparedScan, s: SearchConfig
+    ranked: Ranked, target: PreparedScan, source: PreparedScan, s: SearchConfig, voxel: float
 ) -> tuple[Ranked, str]:
     """The candidates, the second first when the best contradicts what the scanners saw
     (:mod:`ndt_cli.ndt.visibility`), and the warning that says so ('' when kept)."""
     if len(ranked.poses) < 2 or s.free_space_ratio <= 0.0:
         return ranked, ""
-    sights = _sight(target), _sight(source)
+    sights, gap = (_sight(target), _sight(source)), margin(voxel)
     if sights[0] is None or sights[1] is None:
         return ranked, ""
     shares = np.array(
         [
-            free_space_share(*sights, target.from_local() @ pose2d_matrix(*p) @ source.to_local())
+            free_space_share(
+                *sights, target.from_local() @ pose2d_matrix(*p) @ source.to_local(), gap
+            )
             for p in ranked.poses[:2]
         ]
     )
@@ -197,21 +202,24 @@ def register_prepared(
     refined = coarse_to_fine(
         start.candidates, schedule, maps, sampler, cfg.optimizer, restarts, kernels
     )
-    ranked, picked = _free_space(rank(refined, schedule[-1]), target, source, cfg.search)
+    ranked, picked = _free_space(
+        rank(refined, schedule[-1]), target, source, cfg.search, cfg.refine.voxel
+    )
     gate_map, gate_points = gate_inputs(
         maps, sampler, target.slices, source.slices, cfg.grid, cfg.source
     )
     fit = measure_fit(gate_map, gate_points, ranked.poses[0], ranked.ambiguity, kernels)
+    converged = bool(ranked.converged[0]) if picked else refined.converged
     T = target.from_local() @ pose2d_matrix(*ranked.poses[0]) @ source.to_local()
     t_ndt = time.perf_counter() - t_start
-    refinement = _refine(target, source, T, fit.score > 0.0 and refined.converged, cfg)
+    refinement = _refine(target, source, T, fit.score > 0.0 and converged, cfg)
     moved = _planar(target, source, refinement.T) if refinement.icp is not None else None
     after = None if moved is None else measure_fit(gate_map, gate_points, moved, 0.0, kernels)
-    verdict = judge(fit, refined.converged, refinement, target.level, cfg.quality, after, picked)
+    verdict = judge(fit, converged, refinement, target.level, cfg.quality, after, picked)
     per_slice = tuple(int(n) for n in sampler.fine.per_slice(len(source.slices)))
     stages = _Stages(
         (*start.levels, *refined.levels),
-        refined.converged,
+        converged,
         ranked,
         fit,
         refinement,

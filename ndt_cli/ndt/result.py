@@ -56,7 +56,8 @@ class Candidate:
     ty: float
     yaw_deg: float
     score: float  # at the finest cell size
-    evidence: float  # fit-weighted score summed over the finest levels (the winner's is highest)
+    evidence: float  # fit-weighted score over the finest levels; the kept pose's is highest
+    # unless the free-space check kept the second (ndt_cli.ndt.visibility)
 
 
 def describe_direction(v: np.ndarray | None) -> str:
@@ -161,10 +162,12 @@ class RegistrationResult:
 
     @property
     def ambiguity(self) -> float:
-        """Evidence of the second-best distinct candidate over the best (0: unique, 1: a tie)."""
-        if len(self.candidates) < 2 or self.candidates[0].evidence <= 0:
+        """Evidence of the weaker of the first two distinct candidates over the stronger's (0:
+        unique, 1: a tie); the first is the kept pose, normally the one of most evidence."""
+        if len(self.candidates) < 2:
             return 0.0
-        return float(self.candidates[1].evidence / self.candidates[0].evidence)
+        weak, strong = sorted(c.evidence for c in self.candidates[:2])
+        return float(weak / strong) if strong > 0 else 0.0
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict: every field, plus values derived from them for readers of the file."""

@@ -9,10 +9,10 @@ as high as the truth when the scanners stand far apart.
 Each scan's 3D points thinned for ICP are summarised as a :class:`RangeImage`: the nearest
 range (m) per direction bin of 1 x 1.5 degrees (azimuth x elevation), the scanner at the origin
 of the scan's frame, as ``input.min_range`` and ``input.max_range`` assume too. A point
-conflicts when it lies more than :data:`MARGIN` in front of the nearest surface seen in its
-direction. Only points more than :data:`MIN_HEIGHT` above the ground are checked: ground seen
-at grazing angles spreads over neighbouring elevation bins and would conflict with a right
-pose too.
+conflicts when it lies more than a margin (:func:`margin`: 0.5 m with the default thinning) in
+front of the nearest surface seen in its direction. Only points more than :data:`MIN_HEIGHT`
+above the ground are checked: ground seen at grazing angles spreads over neighbouring elevation
+bins and would conflict with a right pose too.
 
 On simulated streets a right pose puts 1-6 % of the checked points into free space (occlusion
 edges, the bins' width), the wrong poses NDT ranked first or second 10-39 %; on real pairs
@@ -49,13 +49,13 @@ class RangeImage:
         np.minimum.at(ranges, _bins(points, r, n_az, n_el), r)
         return cls(ranges, n_az, n_el)
 
-    def conflicts(self, points: np.ndarray) -> tuple[int, int]:
-        """(points in free space, points whose direction was measured) of (N,3) points in this
-        scanner's frame (m)."""
+    def conflicts(self, points: np.ndarray, margin: float = MARGIN) -> tuple[int, int]:
+        """(points more than ``margin`` m in front of the seen surface, points whose direction
+        was measured) of (N,3) points in this scanner's frame (m)."""
         r = np.linalg.norm(points, axis=1)
         seen = self.ranges[_bins(points, r, self.n_az, self.n_el)]
         measured = np.isfinite(seen)
-        return int((measured & (r < seen - MARGIN)).sum()), int(measured.sum())
+        return int((measured & (r < seen - margin)).sum()), int(measured.sum())
 
 
 def _bins(points: np.ndarray, r: np.ndarray, n_az: int, n_el: int) -> np.ndarray:
@@ -79,7 +79,7 @@ class Sight:
     def of(cls, points: np.ndarray, heights: np.ndarray) -> Sight:
         """From (N,3) points in the scanner's frame and their heights above the ground (m)."""
         high = points[heights > MIN_HEIGHT]
-        return cls(RangeImage.of(points), high[:: max(1, len(high) // MAX_CHECKED)])
+        return cls(RangeImage.of(points), high[:: max(1, -(-len(high) // MAX_CHECKED))])
 
 
 def scanner_inside(points: np.ndarray) -> bool:
@@ -89,20 +89,29 @@ def scanner_inside(points: np.ndarray) -> bool:
     return bool(np.all(lo < 0.0) and np.all(hi > 0.0))
 
 
-def free_space_share(target: Sight, source: Sight, T_target_source: np.ndarray) -> float:
+def margin(voxel: float) -> float:
+    """Margin (m) for points thinned to one centroid per ``voxel`` m cube: :data:`MARGIN`, or
+    twice the voxel when coarser (a centroid can sit that far in front of its surface)."""
+    return max(MARGIN, 2.0 * voxel)
+
+
+def free_space_share(
+    target: Sight, source: Sight, T_target_source: np.ndarray, margin: float = MARGIN
+) -> float:
     """Share of the checked points of both scans that a pose puts into the other scanner's
     free space (0-1); ``T_target_source`` maps the source scanner's frame to the target's."""
     R, t = T_target_source[:3, :3], T_target_source[:3, 3]
-    bad_s, seen_s = target.image.conflicts(source.checked @ R.T + t)
-    bad_t, seen_t = source.image.conflicts((target.checked - t) @ R)
+    bad_s, seen_s = target.image.conflicts(source.checked @ R.T + t, margin)
+    bad_t, seen_t = source.image.conflicts((target.checked - t) @ R, margin)
     return (bad_s + bad_t) / max(seen_s + seen_t, 1)
 
 
 def prefer(shares: np.ndarray, ratio: float, min_share: float) -> int:
     """Index of the pose to keep among poses ranked best first, given their free-space shares:
-    the first, unless it puts at least ``min_share`` of the points into free space and at least
-    ``ratio`` times the share of the second, which is then kept."""
+    the first, unless it puts at least ``min_share`` (and more than none) of the points into
+    free space and more than ``ratio`` (>= 1; 0: never) times the share of the second, which is
+    then kept."""
     if len(shares) < 2 or ratio <= 0.0:
         return 0
     first, second = shares[0], shares[1]
-    return 1 if first >= min_share and first >= ratio * second else 0
+    return 1 if first >= min_share and first > 0.0 and first > ratio * second else 0
