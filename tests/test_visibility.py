@@ -16,6 +16,7 @@ from ndt_cli.ndt.register import register_prepared
 from ndt_cli.ndt.result import RegistrationResult
 from ndt_cli.ndt.visibility import (
     MARGIN,
+    MIN_HEIGHT,
     RangeImage,
     Sight,
     free_space_share,
@@ -72,6 +73,24 @@ def test_only_points_above_the_ground_are_checked():
     sight = Sight.of(room, room[:, 2] - 1.0)  # heights: 1 m below the scanner is the ground
     assert sight.checked[:, 2].min() > 1.5
     assert len(sight.image.ranges) == 360 * 120
+
+
+def test_a_tilted_scan_is_checked_above_its_own_ground_and_in_its_own_frame():
+    rng = np.random.default_rng(1)
+    walls = _room() - [0.0, 0.0, 1.5]  # the scanner 1.5 m above the floor
+    floor = np.column_stack([rng.uniform(-5, 5, (40_000, 2)), np.full(40_000, -1.5)])
+    level = np.concatenate([walls, floor])
+    a = np.radians(10.0)  # the scanner tilted by 10 degrees about x: the floor rises 0.9 m
+    R = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(a), -np.sin(a)], [0.0, np.sin(a), np.cos(a)]])
+    scan = level @ R.T
+    sight = Sight.of_scan(prepare(scan, Config()))
+    assert sight is not None
+    height = (sight.checked @ R)[:, 2] + 1.5  # back in the untilted frame: above the floor
+    assert height.min() > MIN_HEIGHT - 0.1  # 0.1 m: the voxel centroids of ICP's thinning
+    assert len(sight.checked) > 1000
+    inside = np.array([[2.0, 0.0, 0.0]]) @ R.T  # in the room, in the tilted scanner's frame
+    assert sight.image.conflicts(inside) == (1, 1)
+    assert Sight.of_scan(prepare(scan + np.array([6.0e5, 5.4e6, 0.0]), Config())) is None
 
 
 def test_the_origin_must_lie_inside_the_scan():

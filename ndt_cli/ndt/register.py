@@ -39,7 +39,7 @@ from ndt_cli.ndt.quality import Fit, Verdict, judge, measure_fit
 from ndt_cli.ndt.refine import Refinement, refine_pose
 from ndt_cli.ndt.result import LevelStats, RegistrationResult
 from ndt_cli.ndt.search import global_start, start_search
-from ndt_cli.ndt.visibility import Sight, free_space_share, margin, prefer, scanner_inside
+from ndt_cli.ndt.visibility import Sight, free_space_share, margin, prefer
 
 
 @dataclass(frozen=True)
@@ -129,20 +129,6 @@ def _refine(
     )
 
 
-_MIN_SIGHT_POINTS = 100  # fewer 3D points say nothing about what a scanner saw
-
-
-def _sight(scan: PreparedScan) -> Sight | None:
-    """The scan's part in the free-space check; None without 3D points or when the scan does
-    not surround its frame's origin (not in its scanner's frame)."""
-    if scan.points3d is None or len(scan.points3d) < _MIN_SIGHT_POINTS:
-        return None
-    points = scan.points3d + scan.reduction
-    if not scanner_inside(points):
-        return None
-    return Sight.of(points, (scan.points3d @ scan.level.T)[:, 2])
-
-
 def _free_space(
     ranked: Ranked, target: PreparedScan, source: PreparedScan, s: SearchConfig, voxel: float
 ) -> tuple[Ranked, str]:
@@ -150,7 +136,7 @@ def _free_space(
     (:mod:`ndt_cli.ndt.visibility`), and the warning that says so ('' when kept)."""
     if len(ranked.poses) < 2 or s.free_space_ratio <= 0.0:
         return ranked, ""
-    sights, gap = (_sight(target), _sight(source)), margin(voxel)
+    sights, gap = (Sight.of_scan(target), Sight.of_scan(source)), margin(voxel)
     if sights[0] is None or sights[1] is None:
         return ranked, ""
     shares = np.array(

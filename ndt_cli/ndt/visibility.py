@@ -22,13 +22,18 @@ edges, the bins' width), the wrong poses NDT ranked first or second 10-39 %; on 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from ndt_cli.ndt.prepare import PreparedScan
 
 AZ_DEG, EL_DEG = 1.0, 1.5  # direction bins (degrees): about a 0.3 m cell at 15 m
 MARGIN = 0.5  # m in front of the seen surface: far above range noise and the 0.1 m thinning
 MIN_HEIGHT = 0.5  # m above the ground: the points checked
 MAX_CHECKED = 40_000  # points of each scan checked (a regular stride): a few ms per pose
+MIN_POINTS = 100  # fewer 3D points say nothing about what a scanner saw
 
 
 @dataclass(frozen=True)
@@ -80,6 +85,18 @@ class Sight:
         """From (N,3) points in the scanner's frame and their heights above the ground (m)."""
         high = points[heights > MIN_HEIGHT]
         return cls(RangeImage.of(points), high[:: max(1, -(-len(high) // MAX_CHECKED))])
+
+    @classmethod
+    def of_scan(cls, scan: PreparedScan) -> Sight | None:
+        """From a prepared scan's 3D points (its frame; heights in its levelled frame); None
+        without 3D points or when they do not surround the frame's origin (not in the
+        scanner's own frame)."""
+        if scan.points3d is None or len(scan.points3d) < MIN_POINTS:
+            return None
+        points = scan.points3d + scan.reduction
+        if not scanner_inside(points):
+            return None
+        return cls.of(points, (scan.points3d @ scan.level.T)[:, 2])
 
 
 def scanner_inside(points: np.ndarray) -> bool:
