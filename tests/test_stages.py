@@ -204,7 +204,8 @@ def test_preparing_on_the_numpy_twins_gives_the_same_slices(small_pair):
     scans, _, _ = small_pair
     fast, slow = (load_and_prepare(scans[0], Config(), k) for k in (NUMBA, NUMPY))
     np.testing.assert_array_equal(fast.reduction, slow.reduction)
-    np.testing.assert_array_equal(fast.level, slow.level)
+    # normals by Jacobi rotations or by LAPACK: the levelling agrees to rounding
+    np.testing.assert_allclose(fast.level, slow.level, rtol=0, atol=1e-12)
     for a, b in zip(fast.slices, slow.slices, strict=True):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-9)
     np.testing.assert_allclose(fast.points3d, slow.points3d, rtol=0, atol=1e-9)

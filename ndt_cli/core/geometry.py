@@ -3,13 +3,17 @@ the dominant "up" direction of a scan."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ndt_cli.core.planes import local_planes
+
 if TYPE_CHECKING:
     from scipy.spatial import cKDTree
 
+Planes = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]  # local_planes' type
 VOXEL_OFFSET = 1 << 20  # voxel indices are packed as 21-bit fields: +-1e6 voxels from origin
 
 
@@ -84,19 +88,22 @@ def query_threads() -> int:
     return int(numba.get_num_threads())
 
 
-def normals(points: np.ndarray, tree: cKDTree, k: int = 12) -> tuple[np.ndarray, np.ndarray]:
-    """Unit normals from the covariance of each point's ``k`` neighbours, and a planarity in
-    [0, 1] (1 - smallest/middle eigenvalue) to drop points without a clear plane."""
+def normals(
+    points: np.ndarray, tree: cKDTree, k: int = 12, planes: Planes = local_planes
+) -> tuple[np.ndarray, np.ndarray]:
+    """Unit normals from the covariance of each point's ``k`` neighbours in ``tree``, and a
+    planarity in [0, 1] (1 - smallest/middle eigenvalue) to drop points without a clear plane
+    (:mod:`ndt_cli.core.planes`; ``planes``: the kernel or its numpy twin)."""
     _, idx = tree.query(points, k=k, workers=query_threads())
-    nb = np.asarray(tree.data)[idx]
-    d = nb - nb.mean(axis=1, keepdims=True)
-    cov = np.einsum("nki,nkj->nij", d, d) / k
-    w, V = np.linalg.eigh(cov)
-    return V[:, :, 0], 1.0 - w[:, 0] / np.maximum(w[:, 1], 1e-12)
+    return planes(np.asarray(tree.data), idx)
 
 
 def dominant_up(
-    points: np.ndarray, voxel: float = 0.25, max_tilt_deg: float = 25.0, sample: int = 20_000
+    points: np.ndarray,
+    voxel: float = 0.25,
+    max_tilt_deg: float = 25.0,
+    sample: int = 20_000,
+    planes: Planes = local_planes,
 ) -> np.ndarray:
     """Unit normal (frame of ``points``) shared by most of the roughly horizontal surfaces.
 
@@ -112,7 +119,8 @@ def dominant_up(
     if len(thin) < 50:
         return up
     tree = cKDTree(thin, balanced_tree=False, compact_nodes=False)  # builds in half the time
-    n, planarity = normals(thin[:: max(1, len(thin) // sample)], tree, k=min(10, len(thin)))
+    k = min(10, len(thin))
+    n, planarity = normals(thin[:: max(1, len(thin) // sample)], tree, k, planes)
     n = n * np.where(n[:, 2] < 0, -1.0, 1.0)[:, None]
     n = n[(planarity > 0.7) & (n[:, 2] > np.cos(np.radians(max_tilt_deg)))]
     if len(n) < 20:

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ndt_cli.core import planes
+from ndt_cli.core.geometry import Planes
 from ndt_cli.ndt import bnb_kernels, kernels, passes
 from ndt_cli.ndt.bnb_kernels import SearchKernels
 from ndt_cli.ndt.grid import NDTMap
@@ -28,6 +30,7 @@ class Kernels:
     bounds: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
     slice_pass: Callable[..., tuple]
     search: SearchKernels  # the branch and bound of the global search
+    planes: Planes  # normals and planarity of 3D neighbourhoods (levelling, ICP)
 
     def __repr__(self) -> str:
         return f"Kernels({self.name})"
@@ -40,6 +43,7 @@ NUMBA = Kernels(
     passes.bounds,
     passes.slice_pass,
     bnb_kernels.NUMBA,
+    planes.local_planes,
 )
 NUMPY = Kernels(
     "numpy",
@@ -48,4 +52,5 @@ NUMPY = Kernels(
     passes.bounds_numpy,
     passes.slice_pass_numpy,
     bnb_kernels.NUMPY,
+    planes.local_planes_numpy,
 )

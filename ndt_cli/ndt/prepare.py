@@ -18,7 +18,8 @@ import numpy as np
 
 from ndt_cli.config.rules import axes_matrix
 from ndt_cli.config.schema import Config, GroundConfig, InputConfig, SlicesConfig
-from ndt_cli.core.geometry import VoxelThinner, dominant_up
+from ndt_cli.core.geometry import Planes, VoxelThinner, dominant_up
+from ndt_cli.core.planes import local_planes
 from ndt_cli.core.transforms import (
     levelling_rotation,
     rotation4,
@@ -191,7 +192,11 @@ def _first_pass(scan: ScanChunks, inp: InputConfig, kernels: Kernels) -> _FirstP
 
 
 def reduction_and_level(
-    lo: np.ndarray, hi: np.ndarray, sample: np.ndarray, ground: GroundConfig
+    lo: np.ndarray,
+    hi: np.ndarray,
+    sample: np.ndarray,
+    ground: GroundConfig,
+    planes: Planes = local_planes,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Reduction point (scanner frame, m) and levelling rotation of a scan from its bounding
     box and a sample of its points: coarse levelling from the dominant up direction (tilts of
@@ -202,7 +207,7 @@ def reduction_and_level(
     rel = sample - centre
     level = np.eye(3)
     if ground.level:
-        u = dominant_up(rel)
+        u = dominant_up(rel, planes=planes)
         level = levelling_rotation(-u[0] / u[2], -u[1] / u[2])
         rel = rel @ level.T
     offset = np.array([0.0, 0.0, estimate_ground(rel[:, 2], ground.bin_size)])
@@ -258,7 +263,7 @@ def prepare_chunks(
     (``icp_voxel`` m, 0: no ICP points). Fewer than ``min_points`` slice points is an error.
     """
     first = _first_pass(scan, inp or InputConfig(), kernels)
-    reduction, level = reduction_and_level(first.lo, first.hi, first.sample, ground)
+    reduction, level = reduction_and_level(first.lo, first.hi, first.sample, ground, kernels.planes)
     cut, thin = _second_pass(scan, reduction, level, slices, icp_voxel, kernels)
     if sum(len(s) for s in cut) < min_points:
         raise InputError(
@@ -299,6 +304,18 @@ def load_and_prepare(
     return load_and_prepare_chunks(ScanChunks.of(scan, cfg.input), cfg, kernels)
 
 
+def _load_runtime(kernels: Kernels) -> None:
+    """Load what preparing a scan needs once per process: Numba's runtime (its first call of a
+    cached kernel takes about half a second, almost all of it holding the GIL) and scipy's k-d
+    tree. Run in a helper thread while the files are read, it overlaps the reads, which spend
+    their time in the disk and in numpy. A failure here is left to the real call to report."""
+    try:
+        kernels.bounds(np.zeros((1, 3)))
+        import scipy.spatial  # noqa: F401
+    except Exception:  # the same call fails again where its error is reported
+        return
+
+
 def load_and_prepare_pair(
     target: str | Path | np.ndarray,
     source: str | Path | np.ndarray,
@@ -306,11 +323,14 @@ def load_and_prepare_pair(
     kernels: Kernels = NUMBA,
 ) -> tuple[PreparedScan, PreparedScan]:
     """:func:`load_and_prepare` of two scans at once: the source in a helper thread while this
-    thread prepares the target. Reading, the passes over the points and the thinning release
-    the GIL, so on two cores a pair takes about two thirds of the time of two scans in turn.
+    thread prepares the target, while a third loads the runtime (:func:`_load_runtime`).
+    Reading, the passes over the points and the thinning release the GIL, so on two cores a
+    pair takes about two thirds of the time of two scans in turn.
     The scans are independent: the results are those of two calls in turn. The target's error,
     if any, is the one raised. The helper is a daemon: Ctrl-C is not held up until it ends."""
     done: dict[str, PreparedScan | BaseException] = {}
+    loader = threading.Thread(target=_load_runtime, args=(kernels,), name="runtime", daemon=True)
+    loader.start()
 
     def prepare_source() -> None:
         try:

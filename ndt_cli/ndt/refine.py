@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ndt_cli.config.schema import RefineConfig
-from ndt_cli.core.geometry import normals, query_threads, voxel_thin
+from ndt_cli.core.geometry import Planes, normals, query_threads, voxel_thin
+from ndt_cli.core.planes import local_planes
 from ndt_cli.core.transforms import transform_errors, translation
 
 _MIN_PLANARITY = 0.7  # target points whose neighbourhood is not clearly planar are not used
@@ -65,6 +66,7 @@ def icp(
     huber: float = 0.02,
     max_source_points: int = 20_000,
     overlap_distance: float = 0.2,
+    planes: Planes = local_planes,
 ) -> IcpResult:
     """Refine ``T0`` (source -> target) by robust point-to-plane ICP. ``voxel=None``: the
     points are thinned already. Target normals are computed for the points ICP reaches only."""
@@ -90,7 +92,7 @@ def icp(
         ok = np.isfinite(d)
         need = np.unique(j[ok][np.isnan(planarity[j[ok]])])
         if len(need):
-            n[need], planarity[need] = normals(tgt[need], tree)
+            n[need], planarity[need] = normals(tgt[need], tree, planes=planes)
         ok[ok] &= planarity[j[ok]] > _MIN_PLANARITY
         if ok.sum() < 6:
             break
@@ -141,6 +143,7 @@ def refine_pose(
     T: np.ndarray,
     refine: RefineConfig,
     overlap_distance: float,
+    planes: Planes = local_planes,
 ) -> Refinement:
     """ICP of the scans' thinned points (each minus its reduction point) from ``T``; a
     correction larger than ``refine.max_correction`` (m, or degrees) is not applied."""
@@ -157,6 +160,7 @@ def refine_pose(
         huber=refine.huber,
         iterations=refine.iterations,
         overlap_distance=overlap_distance,
+        planes=planes,
     )
     moved_deg, moved_m = transform_errors(res.T, T_red)
     if (
