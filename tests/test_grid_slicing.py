@@ -101,6 +101,25 @@ def test_voxel_filter_and_subsample_are_deterministic():
     assert len(a) == 100 and np.array_equal(a, b)
 
 
+def test_ground_plane_is_the_least_squares_plane_of_the_ground_without_the_clutter():
+    from ndt_cli.ndt.slicing import _plane, fit_ground_plane
+
+    rng = np.random.default_rng(8)
+    xy = rng.uniform(-40, 60, (20_000, 2))
+    a, b, c = 0.03, -0.02, 0.05  # a scanner tilted 1.7 and 1.1 degrees, ground 5 cm up
+    ground = np.column_stack([xy, a * xy[:, 0] + b * xy[:, 1] + c + rng.normal(0, 0.01, 20_000)])
+    clutter = np.column_stack([rng.uniform(-40, 60, (3000, 2)), rng.uniform(0.2, 3.0, 3000)])
+    pts = np.vstack([ground, clutter])
+    got = fit_ground_plane(pts)
+    assert abs(got[0] - a) < 2e-5 and abs(got[1] - b) < 2e-5 and abs(got[2] - c) < 1e-3, got
+    # each step is numpy's least squares (1e-9), here on points far from their origin
+    g = ground + np.array([1500.0, -800.0, 0.0])
+    ref = np.linalg.lstsq(np.column_stack([g[:, :2], np.ones(len(g))]), g[:, 2], rcond=None)[0]
+    np.testing.assert_allclose(_plane(g), ref, rtol=0, atol=1e-9)
+    flat = np.column_stack([np.arange(50.0), np.zeros(50), np.full(50, 0.2)])  # on one line
+    assert fit_ground_plane(flat) == pytest.approx((0.0, 0.0, 0.2), abs=1e-12)
+
+
 @pytest.fixture(scope="module")
 def tilted_scan():
     """A simulated street scan from a scanner tilted 8 deg in roll and 6 deg in pitch."""

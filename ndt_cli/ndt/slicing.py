@@ -54,10 +54,22 @@ def fit_ground_plane(
         near = np.abs(pts[:, 2] - (a * pts[:, 0] + b * pts[:, 1] + c)) <= width
         if near.sum() < 3:
             break
-        g = pts[near]
-        A = np.column_stack([g[:, 0], g[:, 1], np.ones(len(g))])
-        a, b, c = np.linalg.lstsq(A, g[:, 2], rcond=None)[0]
+        a, b, c = _plane(pts[near])
     return float(a), float(b), float(c)
+
+
+def _plane(g: np.ndarray) -> tuple[float, float, float]:
+    """Least-squares ``z = a x + b y + c`` of (n,3) points: the normal equations of the slopes
+    on coordinates centred on their mean (well conditioned), then ``c`` at the mean."""
+    m = g.mean(axis=0)
+    d = g - m
+    xx, xy, yy = d[:, 0] @ d[:, 0], d[:, 0] @ d[:, 1], d[:, 1] @ d[:, 1]
+    xz, yz = d[:, 0] @ d[:, 2], d[:, 1] @ d[:, 2]
+    det = xx * yy - xy * xy
+    if det <= 1e-12 * max(xx * yy, 1e-300):  # points on a line: no slope across it
+        return 0.0, 0.0, float(m[2])
+    a, b = (yy * xz - xy * yz) / det, (xx * yz - xy * xz) / det
+    return a, b, float(m[2] - a * m[0] - b * m[1])
 
 
 def cut_slices(

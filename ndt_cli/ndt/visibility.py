@@ -50,17 +50,22 @@ class RangeImage:
         """The image of (N,3) points in the scanner's frame (m)."""
         n_az, n_el = round(360 / AZ_DEG), round(180 / EL_DEG)
         ranges = np.full(n_az * n_el, np.inf)
-        r = np.linalg.norm(points, axis=1)
+        r = _ranges(points)
         np.minimum.at(ranges, _bins(points, r, n_az, n_el), r)
         return cls(ranges, n_az, n_el)
 
     def conflicts(self, points: np.ndarray, margin: float = MARGIN) -> tuple[int, int]:
         """(points more than ``margin`` m in front of the seen surface, points whose direction
         was measured) of (N,3) points in this scanner's frame (m)."""
-        r = np.linalg.norm(points, axis=1)
+        r = _ranges(points)
         seen = self.ranges[_bins(points, r, self.n_az, self.n_el)]
         measured = np.isfinite(seen)
         return int((measured & (r < seen - margin)).sum()), int(measured.sum())
+
+
+def _ranges(points: np.ndarray) -> np.ndarray:
+    """Distance (m) of each (N,3) point from the origin."""
+    return np.sqrt(np.einsum("ij,ij->i", points, points))
 
 
 def _bins(points: np.ndarray, r: np.ndarray, n_az: int, n_el: int) -> np.ndarray:
@@ -102,8 +107,8 @@ class Sight:
 def scanner_inside(points: np.ndarray) -> bool:
     """Whether the origin lies inside the horizontal extent of the points: a scan in its
     scanner's frame does, a georeferenced one does not (then the check is skipped)."""
-    lo, hi = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
-    return bool(np.all(lo < 0.0) and np.all(hi > 0.0))
+    x, y = points[:, 0], points[:, 1]  # column by column: several times faster on (N,3) rows
+    return bool(x.min() < 0.0 < x.max() and y.min() < 0.0 < y.max())
 
 
 def margin(voxel: float) -> float:
