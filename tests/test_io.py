@@ -183,6 +183,29 @@ def test_read_chunks_streams_las_and_drops_unusable_points(tmp_path: Path) -> No
     assert len(whole) == 1 and len(whole[0]) == 2000  # formats without streaming: one chunk
 
 
+def test_unusable_rows_are_exactly_the_non_finite_and_the_all_zero_ones() -> None:
+    from ndt_cli.io.points import unusable
+
+    rows = np.array(
+        [
+            [1e-200, 0.0, 0.0],  # squares to 0 but is a point
+            [0.0, -1e200, 0.0],  # squares to inf but is finite
+            [np.nan, 1.0, 2.0],
+            [3.0, -np.inf, 0.0],
+            [0.0, 0.0, 0.0],
+            [-0.0, 0.0, -0.0],
+            [4.0, 5.0, 6.0],
+        ]
+    )
+    data = np.vstack([rows, _points(1000, seed=9)])
+    nonfinite, zero = unusable(data)
+    want_nonfinite = [not all(np.isfinite(v) for v in r) for r in data]  # row by row
+    want_zero = [all(v == 0.0 for v in r) for r in data]
+    assert nonfinite.tolist() == want_nonfinite and zero.tolist() == want_zero
+    assert nonfinite[:7].tolist() == [False, False, True, True, False, False, False]
+    assert zero[:7].tolist() == [False, False, False, False, True, True, False]
+
+
 def test_read_uses_module_chunk_size(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, las_chunks: list[tuple[int, int]]
 ) -> None:

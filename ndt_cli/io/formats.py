@@ -73,24 +73,35 @@ class LasReader(PointReader):
 
     def iter_xyz(self, path: Path, chunk_size: int | None = None) -> Iterator[np.ndarray]:
         with laspy.open(path) as reader:
-            header = reader.header
-            n = int(header.point_count)
-            _check_las_size(header, path)
-            filled = 0
-            for chunk in reader.chunk_iterator(chunk_size or LAS_CHUNK_SIZE):
-                m = len(chunk)
-                if filled + m > n:
-                    raise InputError(f"file holds more points than its header's {n}", path)
-                out = np.empty((m, 3), dtype=np.float64)
+            for chunk in _las_chunks(reader, path, chunk_size or LAS_CHUNK_SIZE):
+                out = np.empty((len(chunk), 3), dtype=np.float64)
                 out[:, 0], out[:, 1], out[:, 2] = chunk.x, chunk.y, chunk.z
-                filled += m
                 yield out
-        if filled != n:
-            raise InputError(f"truncated file: header announces {n} points, found {filled}", path)
 
     def read_xyz(self, path: Path) -> np.ndarray:
-        chunks = list(self.iter_xyz(path))
-        return np.concatenate(chunks) if chunks else np.empty((0, 3))
+        with laspy.open(path) as reader:
+            out = np.empty((int(reader.header.point_count), 3), dtype=np.float64)
+            filled = 0  # filled in place: no second copy of the whole scan
+            for chunk in _las_chunks(reader, path, LAS_CHUNK_SIZE):
+                rows = out[filled : filled + len(chunk)]
+                rows[:, 0], rows[:, 1], rows[:, 2] = chunk.x, chunk.y, chunk.z
+                filled += len(chunk)
+        return out
+
+
+def _las_chunks(reader: laspy.LasReader, path: Path, chunk_size: int) -> Iterator:
+    """The point records of an open LAS/LAZ file, ``chunk_size`` at a time; an InputError when
+    the file holds more or fewer points than its header announces."""
+    n = int(reader.header.point_count)
+    _check_las_size(reader.header, path)
+    filled = 0
+    for chunk in reader.chunk_iterator(chunk_size):
+        if filled + len(chunk) > n:
+            raise InputError(f"file holds more points than its header's {n}", path)
+        filled += len(chunk)
+        yield chunk
+    if filled != n:
+        raise InputError(f"truncated file: header announces {n} points, found {filled}", path)
 
 
 def _check_las_size(header: laspy.LasHeader, path: Path) -> None:

@@ -51,10 +51,16 @@ class PointCloud:
 def unusable(raw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Masks of the (N,3) rows that are not finite, and of those that are exactly (0,0,0).
 
-    Column-wise, which is fast on (N,3) arrays; a usable row is in neither mask.
+    One pass over the rows finds the candidates, whose squared length is not a positive finite
+    number; only those are tested exactly (a tiny or huge coordinate can square to 0 or inf).
+    A usable row is in neither mask.
     """
-    nonfinite = ~np.isfinite(raw[:, 0] + raw[:, 1] + raw[:, 2])
-    zero = (raw[:, 0] == 0.0) & (raw[:, 1] == 0.0) & (raw[:, 2] == 0.0)
+    r2 = np.einsum("ij,ij->i", raw, raw)
+    odd = np.flatnonzero(~(r2 > 0.0) | ~np.isfinite(r2))
+    nonfinite, zero = np.zeros(len(raw), bool), np.zeros(len(raw), bool)
+    rows = raw[odd]
+    nonfinite[odd] = ~np.isfinite(rows).all(axis=1)
+    zero[odd] = (rows == 0.0).all(axis=1)
     return nonfinite, zero
 
 
