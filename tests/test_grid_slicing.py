@@ -239,3 +239,24 @@ def test_slice_pass_matches_its_numpy_twin_with_overlapping_slices():
     np.testing.assert_array_equal(hi, pts.max(axis=0))
     none, nothing = slice_pass(pts, reduction, level, heights, 0.4, 0.0)
     assert nothing is None and all(np.array_equal(a, b) for a, b in zip(none, fast, strict=True))
+
+
+@pytest.mark.parametrize("distinct", [50, 20_000])  # voxels between revisits: few, or evicted
+def test_slice_pass_groups_revisited_voxels_like_its_numpy_twin(distinct):
+    from ndt_cli.core.geometry import VoxelThinner
+    from ndt_cli.ndt.passes import slice_pass, slice_pass_numpy
+
+    rng = np.random.default_rng(11)
+    line = rng.uniform([-40, -40, -2], [40, 40, 15], (distinct, 3))
+    pts = np.vstack([line + rng.normal(0, 0.01, line.shape) for _ in range(4)])  # scan lines
+    args = (np.zeros(3), np.eye(3), [1.0], 0.4, 0.1)
+    _, grouped = slice_pass(pts, *args)
+    _, ref = slice_pass_numpy(pts, *args)
+    t_fast, t_slow = VoxelThinner(0.1), VoxelThinner(0.1)
+    t_fast.add_grouped(*grouped)
+    t_slow.add_grouped(*ref)
+    np.testing.assert_allclose(t_fast.result(), t_slow.result(), rtol=0, atol=1e-9)
+    n_voxels = len(np.unique(ref[0]))
+    if distinct < 1000:  # the voxels of the line before are still known: about one row each
+        assert len(grouped[0]) < 1.1 * n_voxels
+    assert n_voxels <= len(grouped[0]) <= len(pts)

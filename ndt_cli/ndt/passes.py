@@ -40,12 +40,18 @@ def bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return _bounds(np.ascontiguousarray(points, dtype=np.float64))
 
 
+RECENT_BITS = 12  # voxels remembered while grouping (about a scan line's), 64 KB: in cache
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # Fibonacci hashing: 2**64 / golden ratio
+
+
 @numba.njit(cache=True, nogil=True)
 def _slice_pass(
     points, reduction, level, heights, half, voxel, mask, xy, keys, sums, counts
 ):  # pragma: no cover - compiled
     m = -1
-    last = np.int64(-1)
+    recent_key = np.zeros(1 << RECENT_BITS, np.int64)  # a small direct-mapped table of the
+    recent_row = np.full(1 << RECENT_BITS, -1, np.int64)  # voxels seen last and their rows
+    shift = np.uint64(64 - RECENT_BITS)
     inside = True
     for i in range(points.shape[0]):
         x = points[i, 0] - reduction[0]
@@ -67,18 +73,22 @@ def _slice_pass(
             if min(ix, iy, iz) < 0 or max(ix, iy, iz) >= 2 * _OFFSET:
                 inside = False
             key = (ix << 42) | (iy << 21) | iz
-            if key != last:  # consecutive points of a scan line often share a voxel: one row
-                m += 1
+            h = np.int64((np.uint64(key) * _GOLDEN) >> shift)
+            row = recent_row[h]
+            if row < 0 or recent_key[h] != key:  # neighbouring points and scan lines share
+                m += 1  # voxels: a voxel seen recently adds to its row, another starts one
+                row = m
                 keys[m] = key
                 sums[m, 0] = 0.0
                 sums[m, 1] = 0.0
                 sums[m, 2] = 0.0
                 counts[m] = 0.0
-                last = key
-            sums[m, 0] += x
-            sums[m, 1] += y
-            sums[m, 2] += z
-            counts[m] += 1.0
+                recent_key[h] = key
+                recent_row[h] = m
+            sums[row, 0] += x
+            sums[row, 1] += y
+            sums[row, 2] += z
+            counts[row] += 1.0
     return m + 1, inside
 
 
@@ -95,7 +105,8 @@ def slice_pass(
     Returns the (n_k,2) slice points in the reduced, levelled frame ``L (p - reduction)`` (as
     :func:`~ndt_cli.ndt.slicing.cut_slices` at ground 0), and, when ``voxel`` > 0, the points
     ``p - reduction`` (unlevelled) grouped by ``voxel`` cube: keys, coordinate sums and counts,
-    one row per run of consecutive points in the same cube (merge with
+    each added in point order, one row per stretch of points in which the cube stayed among
+    those seen recently (a key may repeat; merge with
     :meth:`~ndt_cli.core.geometry.VoxelThinner.add_grouped`).
     """
     if len(heights) > MAX_SLICES:
