@@ -4,17 +4,16 @@ registration with ICP, run by hand:
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/free_space.py [--street 24 --far 10]
 
 The links of ``benchmarks/search_sweep.py`` (street links 12-30 m apart at any heading, far
-links of scans two apart 34-48 m, corridor links), prepared with their 3D points (the check and
-ICP need them; cached in ``benchmarks/.cache/free_space``). Printed per kind and setting: links
-right against the simulator's true 6-DOF pose (within 0.3 deg / 15 cm), links ok, links ok but
-wrong, links where the check kept the second pose, and the median time per link; then every
-link whose outcome differs.
+links of scans two apart 34-48 m, corridor links), prepared by this code with their 3D points
+(the check and ICP need them; the simulated scans are those the sweep caches). Printed per
+kind and setting: links right against the simulator's true 6-DOF pose (within 0.3 deg /
+15 cm), links ok, links ok but wrong, links where the check kept the second pose, and the
+median time per link; then every link whose outcome differs.
 """
 
 from __future__ import annotations
 
 import os
-import pickle
 import sys
 import time
 from pathlib import Path
@@ -25,14 +24,12 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from benchmarks.search_sweep import link_counts  # noqa: E402
-from ndt_cli import sim  # noqa: E402
+from benchmarks.search_sweep import link_counts, simulated  # noqa: E402
 from ndt_cli.config import Config  # noqa: E402
 from ndt_cli.core.transforms import transform_errors  # noqa: E402
 from ndt_cli.ndt.prepare import PreparedScan, prepare  # noqa: E402
 from ndt_cli.ndt.register import register_prepared  # noqa: E402
 
-CACHE = ROOT / "benchmarks" / ".cache" / "free_space"
 RIGHT_DEG, RIGHT_M = 0.3, 0.15
 SETTINGS = {"on": Config(), "off": Config().replace(search={"free_space_ratio": 0.0})}
 
@@ -40,17 +37,9 @@ SETTINGS = {"on": Config(), "off": Config().replace(search={"free_space_ratio": 
 def _sequence(
     seed: int, n: int, spacing: tuple[float, float], corridor: bool
 ) -> tuple[list[PreparedScan], list[np.ndarray]]:
-    """Prepared scans (with their 3D points) and true poses of one sequence, cached."""
-    path = CACHE / f"seq_{seed}_{n}_{spacing[0]:g}_{spacing[1]:g}_{int(corridor)}.pkl"
-    if path.exists():
-        return pickle.loads(path.read_bytes())
-    _, scans, poses = sim.make_sequence(
-        seed=seed, n_scans=n, spacing=spacing, corridor=corridor, scan_kwargs={"n_azimuth": 1000}
-    )
-    out = ([prepare(s, Config()) for s in scans], poses)
-    CACHE.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(pickle.dumps(out))
-    return out
+    """Scans prepared (with their 3D points) and true poses of one sequence."""
+    scans, poses = simulated(seed, n, spacing, corridor)
+    return [prepare(s, Config()) for s in scans], poses
 
 
 Link = tuple[PreparedScan, PreparedScan, np.ndarray]  # target, source, true T_target_source

@@ -43,7 +43,7 @@ from ndt_cli.ndt.levels import SourceSampler, TargetMaps  # noqa: E402
 from ndt_cli.ndt.prepare import PreparedScan, prepare  # noqa: E402
 from ndt_cli.ndt.search import start_search  # noqa: E402
 
-CACHE = ROOT / "benchmarks" / ".cache" / "search_sweep"
+CACHE = ROOT / "benchmarks" / ".cache" / "sweep_scans"  # simulated points: this code prepares them
 RAYS = {"n_azimuth": 1000}
 FINAL_DEG, FINAL_M = 0.3, 0.15  # success of a registration
 # (name, BnB candidates refined, cells refined with restarts, then cells refined without)
@@ -72,18 +72,26 @@ class Link:
     distance: float  # m between the scanners
 
 
-def _sequence(seed: int, n: int, spacing: tuple[float, float], corridor: bool) -> tuple:
-    """Prepared scans (without ICP points) and poses of one sequence, cached."""
+def simulated(
+    seed: int, n: int, spacing: tuple[float, float], corridor: bool
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """The simulated scans (scanner frames, m) and true poses of one sequence, cached: the
+    preparation is not, so that every run measures the code as it is."""
     path = CACHE / f"seq_{seed}_{n}_{spacing[0]:g}_{spacing[1]:g}_{int(corridor)}.pkl"
     if path.exists():
         return pickle.loads(path.read_bytes())
     _, scans, poses = sim.make_sequence(
         seed=seed, n_scans=n, spacing=spacing, corridor=corridor, scan_kwargs=RAYS
     )
-    prepared = [replace(prepare(s, Config()), points3d=None) for s in scans]
     CACHE.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(pickle.dumps((prepared, poses)))
-    return prepared, poses
+    path.write_bytes(pickle.dumps((scans, poses)))
+    return scans, poses
+
+
+def _sequence(seed: int, n: int, spacing: tuple[float, float], corridor: bool) -> tuple:
+    """Prepared scans (without ICP points) and poses of one sequence."""
+    scans, poses = simulated(seed, n, spacing, corridor)
+    return [replace(prepare(s, Config()), points3d=None) for s in scans], poses
 
 
 def _link(kind: str, seed: int, seq: tuple, i: int, j: int) -> Link:

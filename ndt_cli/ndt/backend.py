@@ -27,7 +27,6 @@ class Kernels:
     name: str
     accumulate: Callable[[NDTMap, SourcePoints, np.ndarray, bool], np.ndarray]
     point_scores: Callable[[NDTMap, SourcePoints, np.ndarray], tuple[np.ndarray, np.ndarray]]
-    bounds: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
     slice_pass: Callable[..., tuple]
     search: SearchKernels  # the branch and bound of the global search
     planes: Planes  # normals and planarity of 3D neighbourhoods (levelling, ICP)
@@ -40,7 +39,6 @@ NUMBA = Kernels(
     "numba",
     kernels.accumulate,
     kernels.point_scores,
-    passes.bounds,
     passes.slice_pass,
     bnb_kernels.NUMBA,
     planes.local_planes,
@@ -49,7 +47,6 @@ NUMPY = Kernels(
     "numpy",
     kernels.accumulate_numpy,
     kernels.point_scores_numpy,
-    passes.bounds_numpy,
     passes.slice_pass_numpy,
     bnb_kernels.NUMPY,
     planes.local_planes_numpy,

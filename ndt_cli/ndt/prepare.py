@@ -28,6 +28,7 @@ from ndt_cli.core.transforms import (
 )
 from ndt_cli.errors import InputError
 from ndt_cli.ndt.backend import NUMBA, Kernels
+from ndt_cli.ndt.passes import bounds
 from ndt_cli.ndt.slicing import GROUND_SAMPLE, estimate_ground, fit_ground_plane
 
 log = logging.getLogger(__name__)
@@ -174,7 +175,7 @@ class _FirstPass:
     n_points: int
 
 
-def _first_pass(scan: ScanChunks, inp: InputConfig, kernels: Kernels) -> _FirstPass:
+def _first_pass(scan: ScanChunks, inp: InputConfig) -> _FirstPass:
     """Bounding box, a regular-stride sample for the ground and the levelling, and the count."""
     stride = scan.n_points // GROUND_SAMPLE + 1
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
@@ -182,7 +183,7 @@ def _first_pass(scan: ScanChunks, inp: InputConfig, kernels: Kernels) -> _FirstP
     for c in scan.chunks():
         if len(c) == 0:
             continue
-        c_lo, c_hi = kernels.bounds(c)
+        c_lo, c_hi = bounds(c)
         lo, hi = np.minimum(lo, c_lo), np.maximum(hi, c_hi)
         parts.append(c[(-seen) % stride :: stride])
         seen += len(c)
@@ -262,7 +263,7 @@ def prepare_chunks(
     ground and the levelling; the second cuts the slices and thins the points for ICP
     (``icp_voxel`` m, 0: no ICP points). Fewer than ``min_points`` slice points is an error.
     """
-    first = _first_pass(scan, inp or InputConfig(), kernels)
+    first = _first_pass(scan, inp or InputConfig())
     reduction, level = reduction_and_level(first.lo, first.hi, first.sample, ground, kernels.planes)
     cut, thin = _second_pass(scan, reduction, level, slices, icp_voxel, kernels)
     if sum(len(s) for s in cut) < min_points:
@@ -310,8 +311,9 @@ def _load_runtime(kernels: Kernels) -> None:
     tree. Run in a helper thread while the files are read, it overlaps the reads, which spend
     their time in the disk and in numpy. A failure here is left to the real call to report."""
     try:
-        kernels.bounds(np.zeros((1, 3)))
-        import scipy.spatial  # noqa: F401
+        import scipy.spatial  # noqa: F401  (first: the levelling needs it before any kernel)
+
+        kernels.slice_pass(np.zeros((1, 3)), np.zeros(3), np.eye(3), [0.0], 0.1, 0.1)
     except Exception:  # the same call fails again where its error is reported
         return
 
