@@ -12,10 +12,10 @@ each 3x3 covariance instead of LAPACK and the ground plane from its normal equat
 lstsq: the levelling rotations moved by about 1e-16, which sent the grid search's Newton steps
 along other paths (iteration counts, a score by 2e-4, the ambiguity of a link by 6 %), while
 the poses after ICP moved by at most 4e-12 m. With LAPACK's normals and lstsq put back, the
-code of that change reproduced the previous files to 1e-16. The commands now run as they ran then: the classic chain (``--neighbours 1 --no-adjust``) and the
-grid of starts (``search.method: starts``); the defaults have moved on (a network, the exact
-global search), so their numbers differ in the last digits and are checked against ground truth
-elsewhere.
+code of that change reproduced the previous files to 1e-16. The commands now run as they ran
+then: the classic chain (``--neighbours 1 --no-adjust``) and the grid of starts
+(``search.method: starts``); the defaults have moved on (a network, the exact global search),
+so their numbers differ in the last digits and are checked against ground truth elsewhere.
 """
 
 from __future__ import annotations

@@ -159,7 +159,8 @@ def _right(T: np.ndarray, truth: np.ndarray) -> bool:
 @pytest.mark.slow
 def test_free_space_corrects_a_far_link_that_evidence_gets_wrong(far_link):
     target, source, truth = far_link
-    off = _register(target, source, Config().replace(search={"free_space_ratio": 0.0}))
+    off_cfg = Config().replace(search={"free_space_ratio": 0.0})
+    off = _register(target, source, off_cfg)
     assert not _right(off.T_target_source, truth), "NDT alone is right here: pick another link"
     on = _register(target, source, Config())
     assert _right(on.T_target_source, truth)
@@ -170,12 +171,13 @@ def test_free_space_corrects_a_far_link_that_evidence_gets_wrong(far_link):
     assert on.ambiguity == pytest.approx(first / second)
     offset = np.array([500_000.0, 5_400_000.0, 100.0])  # georeferenced: nothing to check
     geo = _register(target + offset, source + offset, Config())
+    geo_off = _register(target + offset, source + offset, off_cfg)
     assert not any(w.startswith("free space") for w in geo.warnings)
+    np.testing.assert_array_equal(geo.T_target_source, geo_off.T_target_source)  # skipped
     back = np.linalg.inv(_shift(offset)) @ geo.T_target_source @ _shift(offset)
-    rot, trans = transform_errors(back, off.T_target_source)
-    # the pose of most evidence, as with the check off (the voxels of ICP's thinning fall
-    # differently at large coordinates: centimetres; the right pose is tens of metres away)
-    assert rot < 0.01 and trans < 0.05
+    assert not _right(back, truth)  # the pose of most evidence, as in the scanner frames:
+    rot, trans = transform_errors(back, off.T_target_source)  # up to a slide along its
+    assert rot < 0.05 and trans < 1.0  # weakly constrained direction (the voxels differ)
 
 
 def _shift(offset: np.ndarray) -> np.ndarray:
