@@ -74,19 +74,27 @@ class LasReader(PointReader):
     def iter_xyz(self, path: Path, chunk_size: int | None = None) -> Iterator[np.ndarray]:
         with laspy.open(path) as reader:
             for chunk in _las_chunks(reader, path, chunk_size or LAS_CHUNK_SIZE):
-                out = np.empty((len(chunk), 3), dtype=np.float64)
-                out[:, 0], out[:, 1], out[:, 2] = chunk.x, chunk.y, chunk.z
-                yield out
+                yield _scaled_xyz(chunk, np.empty((len(chunk), 3), dtype=np.float64))
 
     def read_xyz(self, path: Path) -> np.ndarray:
         with laspy.open(path) as reader:
+            chunks = _las_chunks(reader, path, LAS_CHUNK_SIZE)
+            if reader.header.are_points_compressed:  # a LAZ file's size does not vouch for its
+                parts = [_scaled_xyz(c, np.empty((len(c), 3))) for c in chunks]  # count
+                return np.concatenate(parts) if parts else np.empty((0, 3))
+            _check_las_size(reader.header, path)  # before allocating what the header announces
             out = np.empty((int(reader.header.point_count), 3), dtype=np.float64)
             filled = 0  # filled in place: no second copy of the whole scan
-            for chunk in _las_chunks(reader, path, LAS_CHUNK_SIZE):
-                rows = out[filled : filled + len(chunk)]
-                rows[:, 0], rows[:, 1], rows[:, 2] = chunk.x, chunk.y, chunk.z
+            for chunk in chunks:
+                _scaled_xyz(chunk, out[filled : filled + len(chunk)])
                 filled += len(chunk)
         return out
+
+
+def _scaled_xyz(chunk: laspy.ScaleAwarePointRecord, out: np.ndarray) -> np.ndarray:
+    """The scaled x, y, z of a chunk of point records written into ``out`` (m,3)."""
+    out[:, 0], out[:, 1], out[:, 2] = chunk.x, chunk.y, chunk.z
+    return out
 
 
 def _las_chunks(reader: laspy.LasReader, path: Path, chunk_size: int) -> Iterator:
