@@ -89,9 +89,11 @@ def simulated(
 
 
 def _sequence(seed: int, n: int, spacing: tuple[float, float], corridor: bool) -> tuple:
-    """Prepared scans (without ICP points) and poses of one sequence."""
+    """Prepared scans (without ICP points: not thinned for ICP at all) and poses of one
+    sequence."""
     scans, poses = simulated(seed, n, spacing, corridor)
-    return [replace(prepare(s, Config()), points3d=None) for s in scans], poses
+    no_icp = Config().replace(refine={"method": "none"})
+    return [prepare(s, no_icp) for s in scans], poses
 
 
 def _link(kind: str, seed: int, seq: tuple, i: int, j: int) -> Link:
