@@ -239,3 +239,16 @@ def test_a_worker_prepares_each_scan_once_for_all_its_links(tmp_path):
     os.utime(f, ns=(1, 1))  # the file changed: prepared again
     assert tasks.prepare_scan(f, cfg) is not first
     assert "file not found" in tasks.prepare_scan(tmp_path / "none.laz", cfg)
+
+
+def test_a_worker_ships_each_prepared_scan_with_its_free_space_view(tmp_path):
+    from ndt_cli import io, sim
+    from ndt_cli.pipeline import tasks
+
+    _, scans, _ = sim.make_sequence(seed=4, n_scans=1, scan_kwargs={"n_azimuth": 300})
+    f = tmp_path / "s.laz"
+    io.write(f, scans[0])
+    with_check = tasks.prepare_scan(f, Config())
+    assert "sight" in vars(with_check) and with_check.sight is not None  # built by the task
+    without = tasks.prepare_scan(f, Config().replace(search={"free_space_ratio": 0.0}))
+    assert "sight" not in vars(without)  # the check is off: nothing built

@@ -93,6 +93,22 @@ def test_a_tilted_scan_is_checked_above_its_own_ground_and_in_its_own_frame():
     assert Sight.of_scan(prepare(scan + np.array([6.0e5, 5.4e6, 0.0]), Config())) is None
 
 
+def test_a_prepared_scan_builds_its_sight_once_and_ships_it_with_itself():
+    import pickle
+
+    scan = prepare(_room() - [0.0, 0.0, 1.5], Config())
+    sight = scan.sight
+    assert sight is scan.sight  # built once
+    direct = Sight.of_scan(scan)
+    assert direct is not None and sight is not None
+    np.testing.assert_array_equal(sight.image.ranges, direct.image.ranges)
+    np.testing.assert_array_equal(sight.checked, direct.checked)
+    copy = pickle.loads(pickle.dumps(scan))  # as a chain's worker receives it
+    assert "sight" in vars(copy)  # travels with the scan: not rebuilt by the link
+    np.testing.assert_array_equal(copy.sight.image.ranges, direct.image.ranges)
+    np.testing.assert_array_equal(copy.sight.checked, direct.checked)
+
+
 def test_the_origin_must_lie_inside_the_scan():
     room = _room()
     assert scanner_inside(room)

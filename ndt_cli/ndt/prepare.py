@@ -12,6 +12,7 @@ import logging
 import threading
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +31,7 @@ from ndt_cli.errors import InputError
 from ndt_cli.ndt.backend import NUMBA, Kernels
 from ndt_cli.ndt.passes import bounds
 from ndt_cli.ndt.slicing import GROUND_SAMPLE, estimate_ground, fit_ground_plane
+from ndt_cli.ndt.visibility import Sight
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +60,13 @@ class PreparedScan:
     def tilt_deg(self) -> float:
         """Angle (degrees) between the scan's z axis and the ground normal."""
         return rotation_angle_deg(self.level)
+
+    @cached_property
+    def sight(self) -> Sight | None:
+        """What this scan's scanner saw, for the free-space check (None when it cannot say:
+        :meth:`Sight.of_scan`). Built on first use and kept with the scan, pickled copies
+        included: a scan in several links of a network builds it once."""
+        return Sight.of_scan(self)
 
     @property
     def label(self) -> str:

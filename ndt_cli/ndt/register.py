@@ -40,7 +40,7 @@ from ndt_cli.ndt.quality import Fit, Verdict, judge, measure_fit
 from ndt_cli.ndt.refine import Refinement, refine_pose
 from ndt_cli.ndt.result import LevelStats, RegistrationResult
 from ndt_cli.ndt.search import global_start, start_search
-from ndt_cli.ndt.visibility import Sight, free_space_share, margin, prefer
+from ndt_cli.ndt.visibility import free_space_share, margin, prefer
 
 
 @dataclass(frozen=True)
@@ -143,7 +143,7 @@ def _free_space(
     (:mod:`ndt_cli.ndt.visibility`), and the warning that says so ('' when kept)."""
     if len(ranked.poses) < 2 or s.free_space_ratio <= 0.0:
         return ranked, ""
-    sights, gap = (Sight.of_scan(target), Sight.of_scan(source)), margin(voxel)
+    sights, gap = (target.sight, source.sight), margin(voxel)
     if sights[0] is None or sights[1] is None:
         return ranked, ""
     shares = np.array(

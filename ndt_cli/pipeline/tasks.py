@@ -55,9 +55,9 @@ def _cache_key(path: Path, cfg: Config) -> tuple | None:
 
 
 def prepare_scan(path: Path, cfg: Config) -> PreparedScan | str:
-    """The prepared scan, or the one-line reason why it cannot be used. A worker process keeps
-    its last prepared scans: in a network every scan is in several links, and a worker that
-    reads its scans itself (Dask) prepares each at most once for them."""
+    """The prepared scan with its free-space view, or the one-line reason why it cannot be used.
+    A worker process keeps its last prepared scans: in a network every scan is in several
+    links, and a worker that reads its scans itself (Dask) prepares each at most once for them."""
     key = _cache_key(path, cfg)
     if key is not None and key in _prepared:
         _prepared.move_to_end(key)
@@ -66,6 +66,8 @@ def prepare_scan(path: Path, cfg: Config) -> PreparedScan | str:
         scan = load_and_prepare(path, cfg)
     except NdtError as exc:
         return str(exc)
+    if cfg.search.free_space_ratio > 0:
+        _ = scan.sight  # built once here, in parallel, and shipped with the scan to its links
     if key is not None:
         _prepared[key] = scan
         while len(_prepared) > CACHED_SCANS:
