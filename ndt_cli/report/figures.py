@@ -22,14 +22,15 @@ def pyplot() -> Any | None:
     return plt
 
 
-def png_bytes(fig: Any, dpi: int | None = None) -> bytes:
-    """A figure as PNG bytes; the figure is closed."""
+def png_bytes(fig: Any, dpi: int | None = None, *, tight: bool = True) -> bytes:
+    """A figure as PNG bytes; the figure is closed. ``tight``: cropped to what is drawn, which
+    draws the figure twice (a figure of many points sets its margins instead)."""
     import io
 
     import matplotlib.pyplot as plt
 
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", bbox_inches="tight", dpi=dpi)
+    fig.savefig(buf, format="png", bbox_inches="tight" if tight else None, dpi=dpi)
     plt.close(fig)
     return buf.getvalue()
 

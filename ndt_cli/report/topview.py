@@ -57,26 +57,53 @@ def _links(ax: Any, result: ChainResult, plt: Any) -> Any:
     return plt.cm.ScalarMappable(cmap=cmap, norm=plt.Normalize(0, top)) if res else None
 
 
+_MAX_IN = (11.0, 9.0)  # inches: the largest plot area (width, height)
+_MIN_IN = (6.0, 4.0)  # inches: room for the title and the legend
+_MARGIN_IN = (0.9, 0.7, 0.3, 0.55)  # inches: left, bottom, right, top (one title line)
+_BAR_IN = 1.4  # inches right of the plot area for the colour bar and its label
+
+
+def _layout(fig: Any, ax: Any, bar: bool, title_lines: int) -> Any:
+    """Size the figure to the data's aspect with fixed margins (in inches) instead of cropping
+    the saved image to what is drawn, which would draw the scans' points twice. Returns the
+    colour bar's axes (None without ``bar``)."""
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    aspect = (y1 - y0) / max(x1 - x0, 1e-9)  # data height over width
+    w = max(min(_MAX_IN[0], _MAX_IN[1] / aspect), _MIN_IN[0])
+    h = max(min(_MAX_IN[1], w * aspect), _MIN_IN[1])
+    left, bottom, right, top = _MARGIN_IN
+    top += 0.25 * (title_lines - 1)
+    right += _BAR_IN if bar else 0.0
+    fw, fh = left + w + right, bottom + h + top
+    fig.set_size_inches(fw, fh)
+    ax.set_position([left / fw, bottom / fh, w / fw, h / fh])
+    ax.set_aspect("equal", adjustable="datalim")  # the limits widen to fill the area
+    if not bar:
+        return None
+    return fig.add_axes([(left + w + 0.25) / fw, (bottom + 0.2 * h) / fh, 0.2 / fw, 0.6 * h / fh])
+
+
 def topview_png(result: ChainResult) -> bytes | None:
     """``topview.png``, or None without matplotlib."""
     plt = pyplot()
     if plt is None:
         return None
-    fig, ax = plt.subplots(figsize=(10, 8), dpi=120)
+    fig = plt.figure(dpi=120)
+    ax = fig.add_axes([0.0, 0.0, 1.0, 1.0])
     _points(ax, result, plt.get_cmap("tab10"))
     mapping = _links(ax, result, plt)
-    if mapping is not None:
-        fig.colorbar(mapping, ax=ax, shrink=0.6, label="link residual after adjustment (cm)")
-    ax.set_aspect("equal")
-    ax.set_xlabel("x world (m)")
-    ax.set_ylabel("y world (m)")
     not_ok = [
         result.names[k] for k, s in enumerate(result.solution.scans) if s.status.value != "ok"
     ]
+    bar = _layout(fig, ax, mapping is not None, 2 if not_ok else 1)
+    if mapping is not None:
+        fig.colorbar(mapping, cax=bar, label="link residual after adjustment (cm)")
+    ax.set_xlabel("x world (m)")
+    ax.set_ylabel("y world (m)")
     ax.set_title(
         "Scans (slice points) and links (red dashed: rejected or failed)"
         + (f"\nnot ok: {', '.join(not_ok)}" if not_ok else "")
     )
     if result.previews:
         ax.legend(markerscale=6, fontsize="small", loc="best")
-    return png_bytes(fig)
+    return png_bytes(fig, tight=False)
