@@ -1,50 +1,121 @@
-"""The top view's layout: the figure takes the data's shape, with fixed margins in inches."""
+"""The top view (a plan view drawn with Pillow): one scale in x and y, y up, every element where
+the world puts it. Expected pixels come from the layout's own arithmetic checked against world
+distances, and expected colours from the published colour tables."""
 
 from __future__ import annotations
 
+import io
+
 import numpy as np
 import pytest
+from PIL import Image
 
-from ndt_cli.report import topview
-from ndt_cli.report.figures import png_bytes
-
-plt = pytest.importorskip("matplotlib.pyplot")
-
-
-def _drawn(width_m: float, height_m: float, bar: bool) -> tuple:
-    """A street of width_m x height_m laid out by the top view; (figure, axes, colour bar, points)."""
-    fig = plt.figure(dpi=100)
-    ax = fig.add_axes([0.0, 0.0, 1.0, 1.0])
-    rng = np.random.default_rng(0)
-    xy = rng.uniform([0.0, 0.0], [width_m, height_m], (2000, 2))
-    ax.plot(xy[:, 0], xy[:, 1], ".")
-    cax = topview._layout(fig, ax, bar, title_lines=1)
-    fig.canvas.draw()
-    return fig, ax, cax, xy
-
-
-@pytest.mark.parametrize(("width", "height"), [(40.0, 200.0), (300.0, 30.0), (60.0, 50.0)])
-def test_the_plot_area_has_the_data_aspect_and_holds_every_point(width, height):
-    fig, ax, cax, xy = _drawn(width, height, bar=True)
-    box = ax.get_position()  # figure fractions
-    fw, fh = fig.get_size_inches()
-    w_in, h_in = box.width * fw, box.height * fh
-    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
-    assert (y1 - y0) / (x1 - x0) == pytest.approx(h_in / w_in, rel=1e-6)  # 1 m = 1 m
-    assert x0 <= xy[:, 0].min() and xy[:, 0].max() <= x1
-    assert y0 <= xy[:, 1].min() and xy[:, 1].max() <= y1
-    assert topview._MIN_IN[0] - 1e-9 <= w_in <= topview._MAX_IN[0] + 1e-9
-    assert topview._MIN_IN[1] - 1e-9 <= h_in <= topview._MAX_IN[1] + 1e-9
-    bar = cax.get_position()
-    assert box.x1 < bar.x0 and bar.x1 < 1.0  # the colour bar right of the plot, in the figure
-    assert box.x0 > 0.0 and box.y0 > 0.0 and box.y1 < 1.0
-    plt.close(fig)
+from ndt_cli.pipeline.verify import NodeStatus
+from ndt_cli.report.planview import (
+    GRID,
+    PLOT_MAX,
+    PLOT_MIN,
+    SS,
+    TAB10,
+    VIRIDIS,
+    Edge,
+    EdgeStyle,
+    Scan,
+    Scene,
+    nice_step,
+    render,
+    rgb,
+    view_of,
+    viridis,
+)
 
 
-def test_the_image_has_the_figure_size_and_no_colour_bar_without_residuals():
-    fig, _, cax, _ = _drawn(40.0, 200.0, bar=False)
-    assert cax is None and len(fig.axes) == 1
-    fw, fh = fig.get_size_inches()
-    png = png_bytes(fig, tight=False)  # not cropped: the whole laid-out figure
-    width, height = int.from_bytes(png[16:20], "big"), int.from_bytes(png[20:24], "big")
-    assert (width, height) == (round(fw * 100), round(fh * 100))
+def _block(centre: tuple[float, float], half: float = 1.5, step: float = 0.05) -> np.ndarray:
+    """A filled square of points (m): its colour survives the reduction to the final size."""
+    g = np.arange(-half, half + 1e-9, step)
+    x, y = np.meshgrid(g, g)
+    return np.column_stack([x.ravel() + centre[0], y.ravel() + centre[1]])
+
+
+def _street(width: float, length: float) -> Scene:
+    """Two scans: points along both sides of a street, and a block of points at known spots."""
+    t = np.linspace(0.0, length, 400)
+    sides = np.concatenate([np.column_stack([np.zeros_like(t), t]), [[width, 0.0]]])
+    a = Scan(
+        "a", 0, NodeStatus.OK, np.array([width / 2, 10.0]), np.vstack([sides, _block((8, 30))])
+    )
+    b = Scan("b", 1, NodeStatus.SUSPECT, np.array([width / 2, length - 10.0]), _block((8, 60)))
+    edges = (
+        Edge(a.position, b.position, EdgeStyle.RESIDUAL, 2.0),
+        Edge(np.array([30.0, 40.0]), np.array([30.0, 80.0]), EdgeStyle.REJECTED),
+    )
+    return Scene((a, b), edges, 2.0, ("title",))
+
+
+def _pixels(scene: Scene) -> np.ndarray:
+    return np.asarray(Image.open(io.BytesIO(render(scene))).convert("RGB")).astype(int)
+
+
+def _at(pixels: np.ndarray, scene: Scene, xy: tuple[float, float]) -> np.ndarray:
+    """The final image's pixel at world ``xy`` (m)."""
+    c, r = view_of(scene, SS).px(np.array(xy)) / SS
+    return pixels[int(r), int(c)]
+
+
+@pytest.mark.parametrize(("width", "length"), [(40.0, 200.0), (300.0, 30.0), (60.0, 50.0)])
+def test_one_scale_in_x_and_y_y_up_and_every_point_in_the_plot_area(width, length):
+    scene = _street(width, length)
+    view = view_of(scene)
+    p0, px, py = view.px(np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]]))
+    assert px[0] - p0[0] == pytest.approx(p0[1] - py[1])  # 10 m east = 10 m north, in pixels
+    assert px[1] == pytest.approx(p0[1]) and py[0] == pytest.approx(p0[0])
+    assert py[1] < p0[1]  # north is up
+    left, top, right, bottom = view.area
+    assert PLOT_MIN[0] <= right - left <= PLOT_MAX[0] and PLOT_MIN[1] <= bottom - top <= PLOT_MAX[1]
+    for scan in scene.scans:
+        c, r = view.px(scan.points).T
+        assert (c > left).all() and (c < right).all() and (r > top).all() and (r < bottom).all()
+    assert view.world(*view.px(np.array([12.5, -3.0]))) == pytest.approx((12.5, -3.0))
+
+
+def test_points_links_and_scanners_are_drawn_where_the_world_puts_them():
+    scene = _street(40.0, 200.0)
+    pixels = _pixels(scene)
+    assert pixels.shape[:2] == (view_of(scene).size[1], view_of(scene).size[0])
+    assert np.abs(_at(pixels, scene, (8.0, 30.0)) - rgb(TAB10[0])).max() <= 2  # scan a's block
+    assert np.abs(_at(pixels, scene, (8.0, 60.0)) - rgb(TAB10[1])).max() <= 2  # scan b's block
+    assert (_at(pixels, scene, (30.0, 150.0)) == 255).all()  # nothing there: white
+    mid = (20.0, 100.0)  # the residual link at the top of the colour scale: yellow
+    assert np.abs(_at(pixels, scene, mid) - rgb(VIRIDIS[-1])).max() <= 40
+    red = [_at(pixels, scene, (30.0, y)) for y in np.arange(40.5, 80.0, 0.5)]
+    assert sum(np.abs(p - rgb("d62728")).max() <= 60 for p in red) >= 10  # dashed, red
+    assert sum((p == 255).all() for p in red) >= 10  # ... with gaps
+    tri = _at(pixels, scene, (20.0, 10.0 - 0.5 * 200.0 / 860))  # inside the ok scanner's marker
+    assert tri.max() <= 60  # black
+    sq = _at(pixels, scene, (20.0, 190.0))  # the suspect scanner: an orange square
+    assert np.abs(sq - rgb("ff8c00")).max() <= 40
+
+
+def test_colour_tables_and_grid_steps():
+    assert viridis(0.0) == rgb(VIRIDIS[0]) and viridis(1.0) == rgb(VIRIDIS[-1])
+    assert viridis(-1.0) == rgb(VIRIDIS[0]) and viridis(2.0) == rgb(VIRIDIS[-1])
+    half = (np.array(rgb(VIRIDIS[4])) + np.array(rgb(VIRIDIS[5]))) / 2  # 0.5 lies between stops
+    assert np.abs(np.array(viridis(0.5)) - half).max() <= 0.5
+    assert nice_step(230.0) == 50.0  # 38 m wanted: 50 is nearer than 20
+    assert nice_step(60.0) == 10.0
+    assert nice_step(1.3) == 0.2
+    assert nice_step(7000.0) == 1000.0
+
+
+def test_grid_lines_at_round_world_coordinates():
+    scene = _street(40.0, 200.0)
+    view = view_of(scene, SS)
+    (x0, y1), (x1, y0) = view.world(*view.area[:2]), view.world(*view.area[2:])
+    step = nice_step(max(x1 - x0, y1 - y0))
+    lines = np.arange(np.ceil(x0 / step), np.floor(x1 / step) + 1) * step
+    free = [x for x in lines if abs(x) > 5.0 and abs(x - 20.0) > 5.0 and abs(x - 30.0) > 5.0]
+    assert free  # lines away from the street's points, scanners and links
+    pixels = _pixels(scene)
+    for x in free:
+        assert np.abs(_at(pixels, scene, (x, 170.0)) - rgb(GRID)).max() <= 24
+        assert (_at(pixels, scene, (x + step / 2, 170.0)) == 255).all()  # between lines: white

@@ -32,7 +32,6 @@ from ndt_cli.pipeline.workers import ExecutorKind
 if TYPE_CHECKING:
     from ndt_cli.config import Config
     from ndt_cli.pipeline.chain import ChainResult, NetworkOptions
-    from ndt_cli.pipeline.links import Link
 
 chain_app = new_app()
 
@@ -181,21 +180,13 @@ def _run(
     from ndt_cli.pipeline.executors import make_executor
     from ndt_cli.pipeline.scans import scan_names
     from ndt_cli.report.chain_outputs import write_chain_outputs
-    from ndt_cli.report.figures import start_warm_up
 
     t0 = time.perf_counter()
     pool = make_executor(opts.executor, opts.jobs, opts.scheduler)
     pool.start()  # before this process starts threads of its own
     names = tuple(scan_names(paths))
     total = len(paths) * net.neighbours - net.neighbours * (net.neighbours + 1) // 2
-    warming: list[object] = []
     with ChainProgress(names, max(total, 1) + len(net.pairs), enabled=opts.progress) as advance:
-
-        def on_link(link: Link) -> None:
-            if not warming:  # the workers are busy from now on: load the top view's library
-                warming.append(start_warm_up())
-            advance(link)
-
         result = run_chain(
             paths,
             cfg,
@@ -204,7 +195,7 @@ def _run(
             resume=opts.resume,
             anchor=opts.anchor,
             network=net,
-            on_progress=on_link,
+            on_progress=advance,
         )
     runtime = time.perf_counter() - t0
     write_chain_outputs(opts.out, result, cfg, runtime)

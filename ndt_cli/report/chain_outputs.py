@@ -151,11 +151,10 @@ def chain_files(result: ChainResult, cfg: Config, runtime_s: float) -> dict[str,
 
 
 def write_chain_outputs(out: Path, result: ChainResult, cfg: Config, runtime_s: float) -> None:
-    """Publish every chain output (and the top view, with matplotlib) as the content of
-    ``out``, all together; the links of the run are kept for ``--resume``."""
+    """Publish every chain output and the top view as the content of ``out``, all together;
+    the links of the run are kept for ``--resume``."""
     files: dict[str, str | bytes] = dict(chain_files(result, cfg, runtime_s))
     png = topview_png(result)
-    if png is not None:
-        files["topview.png"] = png
+    files["topview.png"] = png
     files["report.html"] = chain_report(result, files["config_used.yaml"], runtime_s, png)
     publish(Path(out), files)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import logging
-import threading
 from typing import Any
 
 log = logging.getLogger(__name__)
@@ -22,38 +21,13 @@ def pyplot() -> Any | None:
     return plt
 
 
-def png_bytes(fig: Any, dpi: int | None = None, *, tight: bool = True) -> bytes:
-    """A figure as PNG bytes; the figure is closed. ``tight``: cropped to what is drawn, which
-    draws the figure twice (a figure of many points sets its margins instead)."""
+def png_bytes(fig: Any, dpi: int | None = None) -> bytes:
+    """A figure as PNG bytes, cropped to what is drawn; the figure is closed."""
     import io
 
     import matplotlib.pyplot as plt
 
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", bbox_inches="tight" if tight else None, dpi=dpi)
+    fig.savefig(buf, format="png", bbox_inches="tight", dpi=dpi)
     plt.close(fig)
     return buf.getvalue()
-
-
-def _warm_up() -> None:
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        from matplotlib.figure import Figure
-    except ImportError:
-        return
-    fig = Figure(figsize=(1, 1))
-    ax = fig.add_subplot()
-    ax.plot([0, 1], [0, 1], ".", label="x")
-    ax.legend()
-    fig.canvas.draw()  # loads the fonts and the renderer once
-
-
-def start_warm_up() -> threading.Thread:
-    """Import matplotlib and draw once, in a daemon thread: a command whose process waits on
-    workers pays the plotting library's start-up (about a second) while it waits, not at the
-    end. A figure made later in the process waits for it if it is still running."""
-    thread = threading.Thread(target=_warm_up, name="plot-warm-up", daemon=True)
-    thread.start()
-    return thread
