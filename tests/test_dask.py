@@ -121,3 +121,26 @@ def test_a_scan_that_cannot_be_read_fails_its_link_once(cluster, files, tmp_path
     assert result.links[0].status == "failed" and "scan_1.laz" in result.links[0].reason
     assert (result.links[1].target, result.links[1].source) == (0, 2)
     assert result.unreadable and 1 in result.unreadable
+
+
+def _after(name: str, seconds: float) -> str:
+    import time
+
+    time.sleep(seconds)
+    return name
+
+
+def test_dask_runs_the_tasks_that_results_add(cluster):
+    from functools import partial
+
+    pool = _dask(cluster)
+    tasks = {"slow": partial(_after, "slow", 3.0), "fast": partial(_after, "fast", 0.0)}
+
+    def then(key, value):
+        return {"added": partial(_after, f"added after {value}", 0.0)} if key == "fast" else {}
+
+    try:
+        order = list(pool.run(tasks, then))
+    finally:
+        pool.close()
+    assert order == [("fast", "fast"), ("added", "added after fast"), ("slow", "slow")]

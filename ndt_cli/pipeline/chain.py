@@ -4,8 +4,9 @@
    (:mod:`ndt_cli.pipeline.network`).
 2. **Prepare** every scan a link needs, once, in parallel; a scan that cannot be read fails its
    links and the plan goes around it.
-3. **Register** the links in parallel on an executor; each finished link is saved at once, so
-   an interrupted run resumes where it stopped (``resume``).
+3. **Register** the links in parallel on an executor, each as soon as its two scans are
+   prepared; each finished link is saved at once, so an interrupted run resumes where it
+   stopped (``resume``).
 4. **Close loops** (with the adjustment): scans that a first solution puts within the loop
    radius but that no link joins are registered too, with the network's pose as one more
    candidate of the search.
@@ -119,14 +120,13 @@ class _ChainRun:
 
     def jobs(self, planned: Sequence[PlannedLink], guesses: dict | None = None) -> list[LinkJob]:
         """One job per planned link, keyed by its inputs (and a loop closure's guess)."""
-        out = []
-        for k in planned:
-            guess = (guesses or {}).get((k.target, k.source))
-            extra = "" if guess is None else " ".join(f"{v:.6f}" for v in guess.ravel())
-            key = link_key(self.hash(k.target), self.hash(k.source), self.cfg_text + extra)
-            index = len(self.order) + len(out)
-            out.append(LinkJob(index, k.target, k.source, key, k.kind, guess))
-        return out
+        return [self._job(k, len(self.order) + n, guesses) for n, k in enumerate(planned)]
+
+    def _job(self, k: PlannedLink, index: int, guesses: dict | None) -> LinkJob:
+        guess = (guesses or {}).get((k.target, k.source))
+        extra = "" if guess is None else " ".join(f"{v:.6f}" for v in guess.ravel())
+        key = link_key(self.hash(k.target), self.hash(k.source), self.cfg_text + extra)
+        return LinkJob(index, k.target, k.source, key, k.kind, guess)
 
     def reuse(self, jobs: list[LinkJob]) -> None:
         """Take the links an earlier run finished with the same inputs (``--resume``)."""
@@ -136,23 +136,59 @@ class _ChainRun:
                 self.finished[(job.target, job.source)] = job.adopt(link)
                 self.reused.add((job.target, job.source))
 
-    def prepare(self, planned: Sequence[PlannedLink]) -> None:
-        """Read and slice, once and in parallel, each scan that an unfinished link needs."""
+    def prepare(self, planned: Sequence[PlannedLink], guesses: dict | None = None) -> None:
+        """Read and slice, once and in parallel, each scan that an unfinished link needs, and
+        start each link as soon as its two scans are ready (no wait for the other scans); a
+        link that finishes is saved at once. Links of a scan that cannot be read are left to
+        :meth:`register`."""
         todo = [j for j in planned if (j.target, j.source) not in self.finished]
         needed = {s for j in todo for s in (j.target, j.source)}
         needed = sorted(needed - set(self.prepared) - set(self.unreadable) - set(self._previewed()))
         task = prepare_scan if self.executor.ships_data else _preview_or_problem
-        tasks = {i: partial(task, self.paths[i], self.cfg) for i in needed}
+        tasks: dict = {("scan", i): partial(task, self.paths[i], self.cfg) for i in needed}
         if tasks:
             progress.info("preparing %d scan(s)", len(tasks))
-        for i, value in self.executor.run(tasks):
-            if isinstance(value, str):
-                self.unreadable[i] = value
-                continue
-            if isinstance(value, PreparedScan):
-                self.prepared[i], value = value, value.preview()
-            self.previews[i] = value
-            self.store.save_preview(self._scan_key(i), value)
+        waiting = {(k.target, k.source): (n, k) for n, k in enumerate(todo)}
+        jobs: dict[tuple[int, int], LinkJob] = {}
+
+        def ready(key: tuple, value: object) -> dict:
+            return {} if key[0] != "scan" else self._start(waiting, jobs, guesses)
+
+        tasks.update(self._start(waiting, jobs, guesses))
+        for key, value in self.executor.run(tasks, ready):
+            if key[0] == "scan":
+                self._prepared(key[1], value)
+            else:
+                self._finish(jobs[key[1:]], value)
+
+    def _ready(self, i: int) -> bool:
+        return i in (self.prepared if self.executor.ships_data else self.previews)
+
+    def _start(self, waiting: dict, jobs: dict, guesses: dict | None) -> dict:
+        """The link tasks whose two scans are ready now (removed from ``waiting``)."""
+        go = [p for p in waiting if self._ready(p[0]) and self._ready(p[1])]
+        tasks = {}
+        for pair in go:
+            n, k = waiting.pop(pair)
+            jobs[pair] = self._job(k, len(self.order) + n, guesses)
+            tasks[("link", *pair)] = self._task(jobs[pair])
+        return tasks
+
+    def _prepared(self, i: int, value: PreparedScan | np.ndarray | str) -> None:
+        if isinstance(value, str):
+            self.unreadable[i] = value
+            return
+        if isinstance(value, PreparedScan):
+            self.prepared[i], value = value, value.preview()
+        self.previews[i] = value
+        self.store.save_preview(self._scan_key(i), value)
+
+    def _finish(self, job: LinkJob, link: Link | str) -> None:
+        if isinstance(link, str):  # the worker died or raised: this link fails, not the run
+            self._report(job.failed(link))
+            return
+        self.store.save(link)
+        self._report(link)
 
     def _previewed(self) -> list[int]:
         return [] if self.executor.ships_data else list(self.previews)
@@ -179,11 +215,7 @@ class _ChainRun:
             progress.info("registering %d link(s)", len(tasks))
         by_index = {job.index: job for job in jobs}
         for index, link in self.executor.run(tasks):
-            if isinstance(link, str):  # the worker died or raised: this link fails, not the run
-                self._report(by_index[index].failed(link))
-                continue
-            self.store.save(link)
-            self._report(link)
+            self._finish(by_index[index], link)
 
     def _task(self, job: LinkJob) -> Callable[[], Link]:
         i, j = job.target, job.source
@@ -233,7 +265,7 @@ class _Step:
     def __call__(self, planned: Sequence[PlannedLink], guesses: dict | None = None) -> None:
         if self.resume:
             self.run.reuse(self.run.jobs(planned, guesses))
-        self.run.prepare(planned)
+        self.run.prepare(planned, guesses)
         self.planned += list(planned)
 
 

@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import logging
 import uuid
-from collections.abc import Hashable, Iterator
+from collections.abc import Hashable
 from typing import Any
 
 from ndt_cli.core.logs import PROGRESS
 from ndt_cli.errors import ConfigError
-from ndt_cli.pipeline.workers import Task, set_threads
+from ndt_cli.pipeline.workers import Results, Task, Then, set_threads
 
 
 def _in_worker(threads: int, task: Task) -> Any:
@@ -59,28 +59,35 @@ class DaskPool:
     def start(self) -> None:
         """Nothing to do: the cluster is up once the client is connected."""
 
-    def run(self, tasks: dict[Hashable, Task]) -> Iterator[tuple[Hashable, Any]]:
-        """Yield (key, result) as tasks finish; a task that raised yields its one-line reason."""
+    def run(self, tasks: dict[Hashable, Task], then: Then | None = None) -> Results:
+        """Yield (key, result) as tasks finish; a task that raised yields its one-line reason.
+        ``then(key, result)`` returns more tasks for this run (see the executors module)."""
         from dask.distributed import as_completed
 
         run_id = uuid.uuid4().hex[:8]
-        futures = {
-            self.client.submit(
-                _in_worker,
-                self.threads,
-                task,
-                key=f"ndt-{run_id}-{key}",
-                pure=False,
-                retries=self.retries,
-            ): key
-            for key, task in tasks.items()
-        }
-        for fut in as_completed(futures):
+        futures = {self._submit(run_id, key, task): key for key, task in tasks.items()}
+        finished = as_completed(list(futures))
+        for fut in finished:
             key = futures[fut]
             try:
-                yield key, fut.result()
+                value = fut.result()
             except Exception as exc:  # KilledWorker, or a bug in the task
-                yield key, f"worker error: {' '.join(str(exc).split())[:200]}"
+                value = f"worker error: {' '.join(str(exc).split())[:200]}"
+            yield key, value
+            for new, task in (then(key, value) if then else {}).items():
+                added = self._submit(run_id, new, task)
+                futures[added] = new
+                finished.add(added)
+
+    def _submit(self, run_id: str, key: Hashable, task: Task) -> Any:
+        return self.client.submit(
+            _in_worker,
+            self.threads,
+            task,
+            key=f"ndt-{run_id}-{key}",
+            pure=False,
+            retries=self.retries,
+        )
 
     def terminate(self) -> None:
         self.close()

@@ -2,16 +2,24 @@
 
 An executor runs a dict of tasks (:data:`~ndt_cli.pipeline.workers.Task`) and yields
 ``(key, value)`` as they finish; a task that raised or whose worker died yields a one-line reason
-(a ``str``) instead of its value.
+(a ``str``) instead of its value. ``then(key, value)``, called after each result is taken, may add
+tasks to the run.
 """
 
 from __future__ import annotations
 
-from collections.abc import Hashable, Iterator
-from typing import Any, Protocol
+from collections.abc import Hashable
+from typing import Protocol
 
 from ndt_cli.pipeline.local_pool import WorkerPool
-from ndt_cli.pipeline.workers import ExecutorKind, Task, default_jobs, threads_per_job
+from ndt_cli.pipeline.workers import (
+    ExecutorKind,
+    Results,
+    Task,
+    Then,
+    default_jobs,
+    threads_per_job,
+)
 
 __all__ = ["Executor", "ExecutorKind", "make_executor"]
 
@@ -23,7 +31,7 @@ class Executor(Protocol):
 
     def start(self) -> None: ...
 
-    def run(self, tasks: dict[Hashable, Task]) -> Iterator[tuple[Hashable, Any]]: ...
+    def run(self, tasks: dict[Hashable, Task], then: Then | None = None) -> Results: ...
 
     def terminate(self) -> None: ...
 

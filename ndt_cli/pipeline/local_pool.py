@@ -8,12 +8,11 @@ import os
 import signal
 import sys
 import threading
-from collections.abc import Callable, Hashable, Iterator
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections.abc import Callable, Hashable
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
-from typing import Any
 
-from ndt_cli.pipeline.workers import Task, set_threads, threads_per_job
+from ndt_cli.pipeline.workers import Results, Task, Then, set_threads, threads_per_job
 
 log = logging.getLogger(__name__)
 
@@ -90,15 +89,18 @@ class WorkerPool:
         if self._pool is None:
             self._new(self.jobs).submit(os.getpid)
 
-    def run(self, tasks: dict[Hashable, Task]) -> Iterator[tuple[Hashable, Any]]:
-        """Yield (key, result) as tasks finish; a task that fails yields its one-line reason."""
+    def run(self, tasks: dict[Hashable, Task], then: Then | None = None) -> Results:
+        """Yield (key, result) as tasks finish; a task that fails yields its one-line reason.
+        ``then(key, result)``, called once the caller has taken a result, returns more tasks
+        for this run (keys not used before): they start at once and their results follow."""
+        tasks = dict(tasks)
         queue = list(tasks)
         workers = self.jobs
         while queue:
             pool = self._pool if self._pool and workers == self.jobs else self._new(workers)
             broken: list[Hashable] = []
-            yield from _collect({pool.submit(tasks[k]): k for k in queue}, broken)
-            queue = [k for k in queue if k in broken]
+            yield from _collect(pool, tasks, queue, broken, then)
+            queue = [k for k in tasks if k in broken]
             if queue and workers == 1:  # in isolation the first task in line killed its worker
                 yield queue.pop(0), "the worker process died (killed, out of memory or crashed)"
             if queue:
@@ -124,13 +126,37 @@ class WorkerPool:
             self._pool = None
 
 
-def _collect(futures: dict, broken: list[Hashable]) -> Iterator[tuple[Hashable, Any]]:
-    """Results of finished futures; keys of those whose worker died go to ``broken``."""
-    for fut in as_completed(futures):
-        key = futures[fut]
+def _collect(
+    pool: ProcessPoolExecutor,
+    tasks: dict[Hashable, Task],
+    keys: list[Hashable],
+    broken: list[Hashable],
+    then: Then | None,
+) -> Results:
+    """Run ``keys`` of ``tasks`` on ``pool`` and yield their results, and those of the tasks
+    ``then`` adds (which join ``tasks``); keys whose worker died go to ``broken``."""
+    pending: dict[Future, Hashable] = {}
+
+    def submit(key: Hashable) -> None:
         try:
-            yield key, fut.result()
+            pending[pool.submit(tasks[key])] = key
         except BrokenProcessPool:
             broken.append(key)
-        except Exception as exc:  # a bug in a task: report it for that task only
-            yield key, f"worker error: {' '.join(str(exc).split())[:200]}"
+
+    for key in keys:
+        submit(key)
+    while pending:
+        done, _ = wait(pending, return_when=FIRST_COMPLETED)
+        for fut in done:
+            key = pending.pop(fut)
+            try:
+                value = fut.result()
+            except BrokenProcessPool:
+                broken.append(key)
+                continue
+            except Exception as exc:  # a bug in a task: report it for that task only
+                value = f"worker error: {' '.join(str(exc).split())[:200]}"
+            yield key, value
+            for new, task in (then(key, value) if then else {}).items():
+                tasks[new] = task
+                submit(new)

@@ -1,17 +1,20 @@
 """What every worker process of a chain shares: the task type and its thread budget.
 
 A task is a picklable callable without arguments (a :func:`functools.partial` of a module-level
-function).
+function). An executor's ``run(tasks, then)`` yields results as tasks finish; ``then`` may add
+tasks to the same run as results come in (a link starts as soon as its two scans are ready).
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Hashable, Iterator
 from enum import StrEnum
 from typing import Any
 
 Task = Callable[[], Any]
+Then = Callable[[Hashable, Any], dict[Hashable, Task]]  # more tasks, given a finished one
+Results = Iterator[tuple[Hashable, Any]]  # (key, result or one-line reason), as tasks finish
 
 
 class ExecutorKind(StrEnum):
