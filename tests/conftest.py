@@ -56,3 +56,27 @@ def unmatched_pair(folder: Path) -> tuple[Path, Path]:
     io.write(a, np.vstack([ground, low]))
     io.write(b, np.vstack([ground, high]))
     return a, b
+
+
+def after(name: str, seconds: float) -> str:
+    """A task for executors: ``name`` after ``seconds`` of sleep."""
+    import time
+
+    time.sleep(seconds)
+    return name
+
+
+def added_task_order(pool) -> list:
+    """The results, in order, of a run of a slow and a fast task on ``pool`` in which the fast
+    task's result adds a third task (the executors' ``then``); the pool is closed."""
+    from functools import partial
+
+    tasks = {"slow": partial(after, "slow", 3.0), "fast": partial(after, "fast", 0.0)}
+
+    def then(key, value):
+        return {"added": partial(after, f"added after {value}", 0.0)} if key == "fast" else {}
+
+    try:
+        return list(pool.run(tasks, then))
+    finally:
+        pool.close()

@@ -10,7 +10,7 @@ import pytest
 
 pytest.importorskip("distributed", reason="the dask extra (dask[distributed]) is not installed")
 
-from conftest import street_files
+from conftest import added_task_order, street_files
 from distributed import Client, LocalCluster
 
 from ndt_cli.config import Config
@@ -123,24 +123,6 @@ def test_a_scan_that_cannot_be_read_fails_its_link_once(cluster, files, tmp_path
     assert result.unreadable and 1 in result.unreadable
 
 
-def _after(name: str, seconds: float) -> str:
-    import time
-
-    time.sleep(seconds)
-    return name
-
-
 def test_dask_runs_the_tasks_that_results_add(cluster):
-    from functools import partial
-
-    pool = _dask(cluster)
-    tasks = {"slow": partial(_after, "slow", 3.0), "fast": partial(_after, "fast", 0.0)}
-
-    def then(key, value):
-        return {"added": partial(_after, f"added after {value}", 0.0)} if key == "fast" else {}
-
-    try:
-        order = list(pool.run(tasks, then))
-    finally:
-        pool.close()
+    order = added_task_order(_dask(cluster))
     assert order == [("fast", "fast"), ("added", "added after fast"), ("slow", "slow")]

@@ -4,15 +4,11 @@ soon as its two scans are ready, without waiting for the slowest scan."""
 from __future__ import annotations
 
 import os
-import time
 from functools import partial
 
+from conftest import added_task_order, after
+
 from ndt_cli.pipeline.local_pool import WorkerPool
-
-
-def _after(name: str, seconds: float) -> str:
-    time.sleep(seconds)
-    return name
 
 
 def _die() -> None:
@@ -20,25 +16,16 @@ def _die() -> None:
 
 
 def test_a_task_added_by_a_result_runs_beside_the_slow_tasks_of_the_run():
-    pool = WorkerPool(2, threads=1)
-    tasks = {"slow": partial(_after, "slow", 3.0), "fast": partial(_after, "fast", 0.0)}
-
-    def then(key, value):
-        return {"added": partial(_after, f"added after {value}", 0.0)} if key == "fast" else {}
-
-    try:
-        order = list(pool.run(tasks, then))
-    finally:
-        pool.close()
+    order = added_task_order(WorkerPool(2, threads=1))
     assert order == [("fast", "fast"), ("added", "added after fast"), ("slow", "slow")]
 
 
 def test_an_added_task_whose_worker_dies_fails_alone():
     pool = WorkerPool(2, threads=1)
-    tasks = {"a": partial(_after, "a", 0.0), "b": partial(_after, "b", 1.0)}
+    tasks = {"a": partial(after, "a", 0.0), "b": partial(after, "b", 1.0)}
 
     def then(key, value):
-        return {"dies": _die, "after": partial(_after, "after", 0.0)} if key == "a" else {}
+        return {"dies": _die, "after": partial(after, "after", 0.0)} if key == "a" else {}
 
     try:
         results = dict(pool.run(tasks, then))
