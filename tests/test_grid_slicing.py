@@ -260,3 +260,18 @@ def test_slice_pass_groups_revisited_voxels_like_its_numpy_twin(distinct):
     if distinct < 1000:  # the voxels of the line before are still known: about one row each
         assert len(grouped[0]) < 1.1 * n_voxels
     assert n_voxels <= len(grouped[0]) <= len(pts)
+
+
+@pytest.mark.parametrize("shape", [(1, 2), (1000, 2), (777, 3), (50, 5)])
+def test_column_bounds_are_the_axis_reductions(shape):
+    from ndt_cli.core.arrays import column_bounds
+
+    rng = np.random.default_rng(shape[0])
+    floats = rng.normal(size=shape) * 1e3
+    floats[rng.integers(0, shape[0]), 0] = np.nan if shape[0] > 1 else floats[0, 0]
+    ints = rng.integers(-(2**40), 2**40, size=shape)
+    for a in (floats, ints):
+        lo, hi = column_bounds(a)
+        np.testing.assert_array_equal(lo, a.min(axis=0))  # NaN where a column holds one
+        np.testing.assert_array_equal(hi, a.max(axis=0))
+        assert lo.dtype == a.dtype and hi.dtype == a.dtype

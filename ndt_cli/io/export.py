@@ -34,6 +34,7 @@ from typing import Protocol
 
 import numpy as np
 
+from ndt_cli.core.arrays import column_bounds
 from ndt_cli.errors import InputError, OutputError
 from ndt_cli.io.atomic import atomic_path
 from ndt_cli.io.records import CHUNK_POINTS, Chunk, Summary, iter_records, summary
@@ -208,7 +209,8 @@ def _first_pass(scan: ExportScan, summ: Summary, chunk_points: int) -> ScanInput
         xyz = _usable(chunk)
         if xyz.any():
             pts = np.column_stack([chunk[a][xyz] for a in "xyz"])
-            lo, hi = np.minimum(lo, pts.min(axis=0)), np.maximum(hi, pts.max(axis=0))
+            low, high = column_bounds(pts)
+            lo, hi = np.minimum(lo, low), np.maximum(hi, high)
         for name, values in chunk.items():
             if name in ("x", "y", "z") or values.dtype.kind != "f":
                 continue

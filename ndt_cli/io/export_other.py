@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any, BinaryIO
 
 import numpy as np
 
+from ndt_cli.core.arrays import column_bounds
 from ndt_cli.errors import OutputError
 from ndt_cli.io.records import Chunk, Dimension, Summary
 
@@ -276,8 +277,9 @@ class E57Sink:
         for field, source, _, _ in self._fields[3:]:
             v = chunk[source]
             columns[source] = self._colour(v) if field.startswith("color") else v
-        self._lo[:3] = np.minimum(self._lo[:3], xyz.min(axis=0))
-        self._hi[:3] = np.maximum(self._hi[:3], xyz.max(axis=0))
+        low, high = column_bounds(xyz)
+        self._lo[:3] = np.minimum(self._lo[:3], low)
+        self._hi[:3] = np.maximum(self._hi[:3], high)
         if "intensity" in columns:
             self._lo[3] = min(self._lo[3], float(columns["intensity"].min()))
             self._hi[3] = max(self._hi[3], float(columns["intensity"].max()))

@@ -11,6 +11,7 @@ import laspy
 import numpy as np
 import plyfile
 
+from ndt_cli.core.arrays import column_bounds
 from ndt_cli.errors import OutputError
 from ndt_cli.io.atomic import atomic_path
 
@@ -33,8 +34,9 @@ def _las_offsets(points: np.ndarray, target: Path) -> np.ndarray:
         raise OutputError("LAS/LAZ cannot store NaN or infinite coordinates", target)
     if len(points) == 0:
         return np.zeros(3)
-    offsets = np.floor(points.min(axis=0))
-    if (points.max(axis=0) - offsets).max() / LAS_SCALE >= 2**31 - 1:
+    low, high = column_bounds(points)
+    offsets = np.floor(low)
+    if (high - offsets).max() / LAS_SCALE >= 2**31 - 1:
         raise OutputError(f"extent too large for LAS at {LAS_SCALE} m resolution", target)
     return offsets
 

@@ -58,6 +58,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ndt_cli.core.arrays import column_bounds
 from ndt_cli.core.transforms import wrap_angle
 from ndt_cli.ndt import bnb_kernels
 from ndt_cli.ndt.bnb_kernels import Lattice, SearchKernels
@@ -99,8 +100,9 @@ def likelihood_field(
     if len(every) == 0:
         return ScoreField(np.zeros((len(xy), 1, 1), np.uint8), np.zeros(2), resolution, np.zeros(2))
     pad = int(np.ceil(FIELD_REACH * sigma_px)) + 1
-    lo = np.floor(every.min(axis=0) / resolution).astype(np.int64) - pad
-    shape = np.floor(every.max(axis=0) / resolution).astype(np.int64) + pad - lo + 1
+    low, high = column_bounds(every)
+    lo = np.floor(low / resolution).astype(np.int64) - pad
+    shape = np.floor(high / resolution).astype(np.int64) + pad - lo + 1
     values = np.zeros((len(xy), *shape), np.uint8)
     for k, s in enumerate(xy):
         if len(s) == 0:

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ndt_cli.core.arrays import column_bounds
 from ndt_cli.core.groups import group_keys, group_sums
 from ndt_cli.errors import ConfigError
 
@@ -122,7 +123,7 @@ def build_map(
                 keys = np.zeros(0, np.int64)
                 means, icov, counts, (nx, ny) = np.zeros((0, 2)), np.zeros((0, 3)), keys, (1, 1)
             else:
-                origin = np.floor(xy.min(axis=0) / cell_size - np.array([sx, sy])) * cell_size
+                origin = np.floor(column_bounds(xy)[0] / cell_size - np.array([sx, sy])) * cell_size
                 origin = origin + np.array([sx, sy]) * cell_size
                 keys, means, icov, counts, (nx, ny) = cell_statistics(
                     xy, origin, cell_size, min_points, min_eigen_ratio, min_variance

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 import numba
 import numpy as np
 
+from ndt_cli.core.arrays import column_bounds
 from ndt_cli.core.geometry import VOXEL_OFFSET as _OFFSET
 from ndt_cli.core.geometry import voxel_keys
 from ndt_cli.ndt.slicing import cut_slices
@@ -22,11 +23,9 @@ Grouped = tuple[np.ndarray, np.ndarray, np.ndarray]  # voxel keys, (n,3) sums, c
 
 
 def bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per-axis minimum and maximum of (N,3) points, column by column: numpy reduces a strided
-    column at memory speed (a reduction over axis 0 of (N,3) rows is several times slower), and
-    needs no compiled kernel, so a scan's first pass does not wait for Numba to load."""
-    cols = [points[:, k] for k in range(3)]
-    return np.array([c.min() for c in cols]), np.array([c.max() for c in cols])
+    """Per-axis minimum and maximum of (N,3) points (:func:`column_bounds`); it needs no
+    compiled kernel, so a scan's first pass does not wait for Numba to load."""
+    return column_bounds(points)
 
 
 RECENT_BITS = 12  # voxels remembered while grouping (about a scan line's), 64 KB: in cache

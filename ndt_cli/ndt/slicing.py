@@ -10,6 +10,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ndt_cli.core.arrays import column_bounds
 from ndt_cli.core.groups import group_keys, group_sums
 
 GROUND_SAMPLE = 400_000  # points of a regular sample enough for the ground and the levelling
@@ -95,8 +96,9 @@ def voxel_filter_2d(xy: np.ndarray, voxel: float) -> np.ndarray:
     if voxel <= 0 or len(xy) == 0:
         return xy
     ij = np.floor(xy / voxel).astype(np.int64)
-    ij -= ij.min(axis=0)
-    keys = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
+    lo, hi = column_bounds(ij)
+    ij -= lo
+    keys = ij[:, 0] * (int(hi[1] - lo[1]) + 1) + ij[:, 1]
     _, inverse, counts = group_keys(keys)
     return group_sums(inverse, xy, counts.size) / counts[:, None]
 

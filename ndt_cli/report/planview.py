@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from ndt_cli.core.arrays import column_bounds
 from ndt_cli.pipeline.verify import NodeStatus
 
 SS = 2  # drawn at this many times the size, then reduced
@@ -121,7 +122,7 @@ def view_of(scene: Scene, ss: int = 1) -> View:
     xy = [s.points for s in scene.scans if s.points is not None]
     xy += [s.position[None] for s in scene.scans if s.position is not None]
     every = np.concatenate(xy) if xy else np.zeros((1, 2))
-    lo, hi = every.min(axis=0), every.max(axis=0)
+    lo, hi = column_bounds(every)
     span = np.maximum(hi - lo, 1.0) * 1.04  # 2 % free on every side
     w = float(np.clip(PLOT_MAX[1] * span[0] / span[1], PLOT_MIN[0], PLOT_MAX[0]))
     h = float(np.clip(w * span[1] / span[0], PLOT_MIN[1], PLOT_MAX[1]))
