@@ -151,17 +151,18 @@ class _ChainRun:
         waiting = {(k.target, k.source): (n, k) for n, k in enumerate(todo)}
         jobs: dict[tuple[int, int], LinkJob] = {}
 
-        def ready(key: tuple, value: object) -> dict:
+        def then(key: tuple, value: object) -> dict:  # a scan is in: start what it completes
             return {} if key[0] != "scan" else self._start(waiting, jobs, guesses)
 
-        tasks.update(self._start(waiting, jobs, guesses))
-        for key, value in self.executor.run(tasks, ready):
+        tasks.update(self._start(waiting, jobs, guesses))  # links whose scans are in already
+        for key, value in self.executor.run(tasks, then):
             if key[0] == "scan":
                 self._prepared(key[1], value)
             else:
                 self._finish(jobs[key[1:]], value)
 
     def _ready(self, i: int) -> bool:
+        """Scan ``i`` is prepared (or, where tasks read their scans, known to be readable)."""
         return i in (self.prepared if self.executor.ships_data else self.previews)
 
     def _start(self, waiting: dict, jobs: dict, guesses: dict | None) -> dict:
