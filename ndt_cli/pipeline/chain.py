@@ -142,8 +142,8 @@ class _ChainRun:
         link that finishes is saved at once. Links of a scan that cannot be read are left to
         :meth:`register`."""
         todo = [j for j in planned if (j.target, j.source) not in self.finished]
-        needed = {s for j in todo for s in (j.target, j.source)}
-        needed = sorted(needed - set(self.prepared) - set(self.unreadable) - set(self._previewed()))
+        scans = {s for j in todo for s in (j.target, j.source)}
+        needed = sorted(s for s in scans if not self._ready(s) and s not in self.unreadable)
         task = prepare_scan if self.executor.ships_data else _preview_or_problem
         tasks: dict = {("scan", i): partial(task, self.paths[i], self.cfg) for i in needed}
         if tasks:
@@ -190,9 +190,6 @@ class _ChainRun:
             return
         self.store.save(link)
         self._report(link)
-
-    def _previewed(self) -> list[int]:
-        return [] if self.executor.ships_data else list(self.previews)
 
     def _scan_key(self, i: int) -> str:
         return link_key(self.hash(i), "", self.cfg_text)
