@@ -25,6 +25,7 @@ from ndt_cli.report.planview import (
     nice_step,
     render,
     rgb,
+    tick_label,
     view_of,
     viridis,
 )
@@ -105,6 +106,9 @@ def test_colour_tables_and_grid_steps():
     assert nice_step(60.0) == 10.0
     assert nice_step(1.3) == 0.2
     assert nice_step(7000.0) == 1000.0
+    zero = np.ceil(-10.0 / 20.0) * 20.0  # the first grid line of a view from x = -10 m
+    assert f"{zero:g}" == "-0"  # negative zero: plain formatting would print it
+    assert [tick_label(v) for v in (zero, -40.0, 2.5, 1e4)] == ["0", "-40", "2.5", "10000"]
 
 
 def test_grid_lines_at_round_world_coordinates():

@@ -144,6 +144,11 @@ def nice_step(span: float, ticks: int = 6) -> float:
     return float(min((m * power for m in (1.0, 2.0, 5.0, 10.0)), key=lambda v: abs(v - raw)))
 
 
+def tick_label(metres: float) -> str:
+    """A grid coordinate as text: ``-50``, ``0`` (never ``-0``), ``2.5``."""
+    return f"{float(metres) + 0.0:g}"
+
+
 def render(scene: Scene) -> bytes:
     """The scene as PNG bytes."""
     from PIL import Image
@@ -224,9 +229,9 @@ def _frame(pen: Any, view: View, ticks: tuple[np.ndarray, np.ndarray], font: Any
     pen.rectangle([left, top, right, bottom], outline=INK, width=SS)
     xs, ys = ticks
     for x, (c, _) in zip(xs, view.px(np.column_stack([xs, np.zeros(len(xs))])), strict=True):
-        pen.text((c, bottom + 5 * SS), f"{x:g}", fill=INK, font=font, anchor="mt")
+        pen.text((c, bottom + 5 * SS), tick_label(x), fill=INK, font=font, anchor="mt")
     for y, (_, r) in zip(ys, view.px(np.column_stack([np.zeros(len(ys)), ys])), strict=True):
-        pen.text((left - 5 * SS, r), f"{y:g}", fill=INK, font=font, anchor="rm")
+        pen.text((left - 5 * SS, r), tick_label(y), fill=INK, font=font, anchor="rm")
 
 
 def _dashes(a: np.ndarray, b: np.ndarray, dash: float) -> list[tuple[np.ndarray, np.ndarray]]:
