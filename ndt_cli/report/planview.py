@@ -111,9 +111,8 @@ class View:
 
     def world(self, col: float, row: float) -> tuple[float, float]:
         """Pixel (column, row) -> world (x, y) m."""
-        return self.x0 + (col - self.area[0]) / self.scale, self.y1 - (
-            row - self.area[1]
-        ) / self.scale
+        x = self.x0 + (col - self.area[0]) / self.scale
+        return x, self.y1 - (row - self.area[1]) / self.scale
 
 
 def view_of(scene: Scene, ss: int = 1) -> View:
@@ -282,7 +281,7 @@ def _title(pen: Any, view: View, lines: tuple[str, ...]) -> None:
     font = _font(TITLE_PX)
     left, top, right, _ = view.area
     for k, line in enumerate(reversed(lines)):
-        y = top - (8 + 20 * k) * SS
+        y = top - (8 + TITLE_LINE * k) * SS
         pen.text(((left + right) / 2, y), line, fill=INK, font=font, anchor="md")
 
 
