@@ -5,11 +5,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numba
 import numpy as np
 
 from benchmarks.common import best_of, table
 from ndt_cli.config import Config
+from ndt_cli.core import threads as kernel_threads
 from ndt_cli.core.transforms import yaw_of
 from ndt_cli.ndt.kernels import MATCHED, accumulate
 from ndt_cli.ndt.levels import SourceSampler, TargetMaps, source_points
@@ -43,11 +43,11 @@ def _rows(maps: TargetMaps, case: tuple, mhz: float) -> list[list[str]]:
     matched = accumulate(maps(cell), src, params, False)[:, MATCHED].sum()
     matched /= len(params) * len(src)
     rows = []
-    threads_all = numba.config.NUMBA_NUM_THREADS
+    threads_all = kernel_threads.initial()
     for lm in (False, True):
         accumulate(maps(cell), src, params, lm)  # compiled / warm
         for threads in sorted({1, threads_all}):
-            numba.set_num_threads(threads)
+            kernel_threads.set_threads(threads)
             t = best_of(lambda m=lm: accumulate(maps(cell), src, params, m))
             evals = len(params) * len(src)
             rate = evals / t
@@ -61,7 +61,7 @@ def _rows(maps: TargetMaps, case: tuple, mhz: float) -> list[list[str]]:
                 f"{bound:.0f}",
                 f"{bound / cycles:.0%}",
             ]
-    numba.set_num_threads(threads_all)
+    kernel_threads.set_threads(threads_all)
     return rows
 
 

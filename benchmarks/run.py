@@ -22,7 +22,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
 import ndt_cli  # noqa: E402
@@ -30,6 +29,7 @@ from benchmarks import data, fresh, inprocess  # noqa: E402
 from benchmarks.common import TARGETS, cpu_mhz, table  # noqa: E402
 from benchmarks.kernel import kernel_throughput  # noqa: E402
 from ndt_cli.config import Config  # noqa: E402
+from ndt_cli.core.threads import threads as kernel_threads  # noqa: E402
 from ndt_cli.io.matrices import read_pose_list  # noqa: E402
 
 
@@ -44,7 +44,7 @@ def header(files: list[Path], small: list[Path], mhz: float) -> None:
     print(f"# ndt-cli {ndt_cli.__version__} benchmark\n")
     print(
         f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores at {mhz:.0f} MHz,"
-        f" Numba threads {numba.config.NUMBA_NUM_THREADS}, Python {platform.python_version()}"
+        f" kernel threads {kernel_threads()}, Python {platform.python_version()}"
     )
     for label, fs in (("full density", files), ("a tenth of the rays", small)):
         counts = ", ".join(f"{data.las_points(f) / 1e6:.2f}" for f in fs)

@@ -7,10 +7,10 @@ ground truth.
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 import pytest
 
+from ndt_cli.core import threads
 from ndt_cli.ndt import bnb, bnb_kernels
 from ndt_cli.ndt.slicing import voxel_filter_2d
 
@@ -153,20 +153,20 @@ def test_search_equals_brute_force(seed, k, exclusion, exclusion_deg, window):
         assert found.nodes < scores.size  # pruning happened
 
 
-def test_numba_threads_and_numpy_twin_agree_exactly():
+def test_thread_counts_and_numpy_twin_agree_exactly():
     rng = np.random.default_rng(7)
     target = _walls(rng, 600)
     source = _moved(_walls(rng, 400), np.array([1.3, -2.2]), 2.5)
     kw = {"window": 8.0, "yaw_step": np.radians(3.0), "candidates": 3, "exclusion": 3.0}
     field = bnb.likelihood_field(target, resolution=0.5)
     runs = [bnb.search_field(field, source, kernels=bnb_kernels.NUMPY, **kw)]
-    threads = numba.get_num_threads()
+    before = threads.threads()
     try:
-        for n in sorted({1, threads}):
-            numba.set_num_threads(n)
+        for n in (1, 2, 3):
+            threads.set_threads(n)
             runs.append(bnb.search_field(field, source, **kw))
     finally:
-        numba.set_num_threads(threads)
+        threads.set_threads(before)
     assert len(runs[0].scores) == 3 and runs[0].scores[0] > 0
     for other in runs[1:]:
         np.testing.assert_array_equal(other.poses, runs[0].poses)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ndt_cli.core import threads
 from ndt_cli.ndt import kernels
 from ndt_cli.ndt.grid import build_map
 from ndt_cli.ndt.kernels import GRAD, HESS, SCORE, SourcePoints, accumulate, accumulate_numpy, sym3
@@ -101,18 +102,18 @@ def test_lm_quantities_match_point_jacobian(setup):
 
 
 def test_reduction_is_deterministic_across_threads(setup):
-    import numba
-
     ndt, src = setup
-    before = numba.get_num_threads()
+    runs = []
+    before = threads.threads()
     try:
-        numba.set_num_threads(1)
-        one = accumulate(ndt, src, PARAMS)
-        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
-        many = accumulate(ndt, src, PARAMS)
+        for n in (1, 2, 3):
+            threads.set_threads(n)
+            runs.append((accumulate(ndt, src, PARAMS), kernels.point_scores(ndt, src, PARAMS[0])))
     finally:
-        numba.set_num_threads(before)
-    assert np.array_equal(one, many)
+        threads.set_threads(before)
+    for acc, (s, J) in runs[1:]:
+        assert np.array_equal(acc, runs[0][0])
+        assert np.array_equal(s, runs[0][1][0]) and np.array_equal(J, runs[0][1][1])
 
 
 def test_points_outside_every_cell_score_zero(setup):

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ndt_cli.core.planes import local_planes
+from ndt_cli.core.threads import threads
 
 if TYPE_CHECKING:
     from scipy.spatial import cKDTree
@@ -80,12 +81,10 @@ def voxel_thin(points: np.ndarray, voxel: float) -> np.ndarray:
 
 
 def query_threads() -> int:
-    """Threads of a k-d tree query: the calling thread's Numba thread budget (all cores unless
-    set; a chain's worker sets its main thread to its share of the cores), so that parallel
-    workers do not each start a thread per core."""
-    import numba
-
-    return int(numba.get_num_threads())
+    """Threads of a k-d tree query: the process's kernel thread budget (all cores unless set; a
+    chain's worker sets it to its share of the cores), so that parallel workers do not each
+    start a thread per core."""
+    return threads()
 
 
 def normals(

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from ndt_cli.core.threads import parallel_for
+
 POOL_CAP = 4096  # leaves a task records before its buffer overflows (it is then rerun larger)
 
 
@@ -170,8 +172,10 @@ def _search_yaw(
     return count, nodes
 
 
-@numba.njit(parallel=True, cache=True, fastmath=False)
+@numba.njit(cache=True, nogil=True)
 def _search_round(
+    start,
+    stop,
     flat,
     level_size,
     ny,
@@ -191,8 +195,9 @@ def _search_round(
     counts,
     nodes,
 ):  # pragma: no cover
-    """One task per yaw of the round, each writing only its own rows of the outputs."""
-    for t in numba.prange(yaws.shape[0]):
+    """Tasks ``start .. stop-1`` of a round (one yaw each), each writing only its own rows of
+    the outputs."""
+    for t in range(start, stop):
         order = orders[t]
         c, e = _search_yaw(
             flat,
@@ -215,20 +220,22 @@ def _search_round(
         nodes[t] = e
 
 
-@numba.njit(parallel=True, cache=True, fastmath=False)
-def _root_bounds(flat, level_size, ny, top, bases, roots, out):  # pragma: no cover
-    """Bound of every root block (level ``top``) at every yaw, into ``out`` (n_yaw, R)."""
-    start = top * level_size
-    for m in numba.prange(bases.shape[0]):
+@numba.njit(cache=True, nogil=True)
+def _root_bounds(start, stop, flat, level_size, ny, top, bases, roots, out):  # pragma: no cover
+    """Bound of every root block (level ``top``) at yaws ``start .. stop-1``, into their rows
+    of ``out`` (n_yaw, R)."""
+    first = top * level_size
+    for m in range(start, stop):
         for r in range(roots.shape[0]):
-            out[m, r] = _bound(flat, start + roots[r, 0] * ny + roots[r, 1], bases[m])
+            out[m, r] = _bound(flat, first + roots[r, 0] * ny + roots[r, 1], bases[m])
 
 
 def root_bounds(lat: Lattice, bases: np.ndarray) -> np.ndarray:
     """Bounds (n_yaw, R) int64 of every yaw's root blocks; ``bases`` (n_yaw, N) int64."""
     out = np.zeros((len(bases), len(lat.roots)), np.int64)
     if bases.shape[1]:
-        _root_bounds(lat.flat, lat.level_size, lat.ny, lat.top, bases, lat.roots, out)
+        args = (lat.flat, lat.level_size, lat.ny, lat.top, bases, lat.roots, out)
+        parallel_for(_root_bounds, len(bases), *args)
     return out
 
 
@@ -255,13 +262,21 @@ def search_round(
     pools = np.empty((B, POOL_CAP, 4), np.int64)
     counts, nodes = np.zeros(B, np.int64), np.zeros(B, np.int64)
     args = (*_round_args(lat), bases, yaws, lat.roots, rbounds, orders, anchors, n_anchors)
-    _search_round(*args, pools, counts, nodes)
+    parallel_for(_search_round, B, *args, pools, counts, nodes)
     leaves = [pools[t, : counts[t]].copy() for t in range(B)]
     for t in np.flatnonzero(counts > POOL_CAP):
         big = np.zeros((1, counts[t], 4), np.int64)
         one = (bases[t : t + 1], yaws[t : t + 1], lat.roots, rbounds[t : t + 1], orders[t : t + 1])
         _search_round(
-            *_round_args(lat), *one, anchors, n_anchors, big, counts[t : t + 1], nodes[t : t + 1]
+            0,
+            1,
+            *_round_args(lat),
+            *one,
+            anchors,
+            n_anchors,
+            big,
+            counts[t : t + 1],
+            nodes[t : t + 1],
         )
         leaves[t] = big[0]
     return leaves, nodes

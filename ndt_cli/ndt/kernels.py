@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from ndt_cli.core.threads import parallel_for
 from ndt_cli.ndt.grid import NDTMap
 
 # accumulator columns
@@ -85,11 +86,12 @@ def _pair(xp, yp, ci, grid):  # pragma: no cover - compiled
     return xp - means[ci, 0], yp - means[ci, 1], icov[ci, 0], icov[ci, 1], icov[ci, 2]
 
 
-@numba.njit(parallel=True, cache=True, fastmath=False)
-def _accumulate(params, xy, sid, grid, cell_size, chunk, lm, out):  # pragma: no cover - compiled
+@numba.njit(cache=True, nogil=True)
+def _accumulate(start, stop, params, xy, sid, grid, cell_size, chunk, lm, out):  # pragma: no cover
+    """Tasks ``start .. stop-1`` of ``poses x chunks``: each fills its own row of ``out``."""
     slice_grids = grid[3]
     n, n_chunks, inv_cell = xy.shape[0], out.shape[1], 1.0 / cell_size
-    for task in numba.prange(params.shape[0] * n_chunks):
+    for task in range(start, stop):
         st = task // n_chunks
         c = task - st * n_chunks
         tx, ty = params[st, 0], params[st, 1]
@@ -149,12 +151,13 @@ def _accumulate(params, xy, sid, grid, cell_size, chunk, lm, out):  # pragma: no
             out[st, c, 10 + q] = rest[q]
 
 
-@numba.njit(parallel=True, cache=True, fastmath=False)
-def _point_scores(p, xy, sid, grid, cell_size, s_out, j_out):  # pragma: no cover - compiled
+@numba.njit(cache=True, nogil=True)
+def _point_scores(start, stop, p, xy, sid, grid, cell_size, s_out, j_out):  # pragma: no cover
+    """Points ``start .. stop-1``: each fills its own row of ``s_out`` and ``j_out``."""
     slice_grids = grid[3]
     inv_cell = 1.0 / cell_size
     co, si = np.cos(p[2]), np.sin(p[2])
-    for i in numba.prange(xy.shape[0]):
+    for i in range(start, stop):
         x, y = xy[i, 0], xy[i, 1]
         xp = co * x - si * y + p[0]
         yp = si * x + co * y + p[1]
@@ -203,7 +206,9 @@ def accumulate(
     n_chunks = max(1, -(-len(src) // CHUNK))
     out = np.zeros((params.shape[0], n_chunks, NACC))
     if len(src) and params.shape[0]:
-        _accumulate(params, src.xy, src.slice_id, *_map_args(ndt_map), CHUNK, lm, out)
+        tasks = params.shape[0] * n_chunks
+        args = (params, src.xy, src.slice_id, *_map_args(ndt_map), CHUNK, lm, out)
+        parallel_for(_accumulate, tasks, *args)
     return out.sum(axis=1)
 
 
@@ -215,7 +220,7 @@ def point_scores(
     s = np.zeros(len(src))
     J = np.zeros((len(src), 3))
     if len(src):
-        _point_scores(p, src.xy, src.slice_id, *_map_args(ndt_map), s, J)
+        parallel_for(_point_scores, len(src), p, src.xy, src.slice_id, *_map_args(ndt_map), s, J)
     return s, J
 
 

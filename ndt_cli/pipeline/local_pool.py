@@ -29,7 +29,7 @@ def start_method() -> str:
 
     A forked worker inherits the modules its parent imported (numpy, Numba, the package: about
     a second of start-up per worker saved). Forking is safe only from a process that has one
-    thread: a thread pool that ran in the parent (Numba's OpenMP threads, the LAZ decoder's
+    thread: a thread pool that ran in the parent (the kernels' threads, the LAZ decoder's
     threads, BLAS threads) exists in the child without its threads, and the child's first
     parallel call waits for them forever. Linux only (macOS system libraries are not
     fork-safe).

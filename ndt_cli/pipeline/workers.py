@@ -25,7 +25,7 @@ class ExecutorKind(StrEnum):
 
 
 def threads_per_job(jobs: int) -> int:
-    """Numba threads for each of ``jobs`` parallel workers on this machine's cores."""
+    """Kernel threads for each of ``jobs`` parallel workers on this machine's cores."""
     return max(1, (os.cpu_count() or 1) // max(1, jobs))
 
 
@@ -35,8 +35,9 @@ def default_jobs(jobs: int | None) -> int:
 
 
 def set_threads(threads: int) -> None:
-    """Bound the Numba threads of this process (BLAS threads would spin against them)."""
+    """Bound the kernel threads of this process (:mod:`ndt_cli.core.threads`) to ``threads``,
+    at most the budget it started with; BLAS gets one (its threads would spin against them)."""
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    import numba
+    from ndt_cli.core import threads as budget
 
-    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+    budget.set_threads(min(threads, budget.initial()))
