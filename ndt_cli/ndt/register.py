@@ -35,6 +35,7 @@ from ndt_cli.core.transforms import pose2d_matrix, yaw_of
 from ndt_cli.ndt.backend import NUMBA, Kernels
 from ndt_cli.ndt.coarse_to_fine import Ranked, coarse_to_fine, rank, with_verification
 from ndt_cli.ndt.levels import SourceSampler, TargetMaps, gate_inputs
+from ndt_cli.ndt.precompile import search_kernels_ahead
 from ndt_cli.ndt.prepare import PreparedScan, load_and_prepare_pair
 from ndt_cli.ndt.quality import Fit, Verdict, judge, measure_fit
 from ndt_cli.ndt.refine import Refinement, refine_pose
@@ -284,7 +285,8 @@ def register(
 
     t0 = time.perf_counter()
     cfg = config if isinstance(config, Config) else load(config)
-    tgt, src = load_and_prepare_pair(target, source, cfg, kernels)
+    with search_kernels_ahead(enabled=kernels is NUMBA):  # on an empty cache: the other core
+        tgt, src = load_and_prepare_pair(target, source, cfg, kernels)
     t_read = time.perf_counter() - t0
     result = register_prepared(tgt, src, cfg, init, kernels)
     timings = {"read_prepare_s": t_read, **result.timings}
