@@ -48,34 +48,44 @@ def cached(dispatcher: object) -> bool:
     return (Path(dispatcher.stats.cache_path) / index).is_file()
 
 
-@contextmanager
-def search_kernels_ahead(enabled: bool = True) -> Iterator[None]:
-    """Within the block, a child compiles the search's kernels if any is not cached (and
-    ``enabled``); the block's end compiles the NDT levels' kernel and waits for the child. An
-    error in the block stops the child."""
-    child = None
-    if enabled and not all(cached(d) for d in search_dispatchers()):
-        child = subprocess.Popen(
+def _start_child() -> subprocess.Popen | None:
+    """The child that compiles the search's kernels; None when it cannot start."""
+    try:
+        return subprocess.Popen(
             [sys.executable, "-m", __name__],
             stdin=subprocess.DEVNULL,
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
         )
+    except OSError:  # this process compiles them itself
+        return None
+
+
+def _stop(child: subprocess.Popen) -> None:
+    child.kill()
+    child.wait()
+
+
+@contextmanager
+def search_kernels_ahead(enabled: bool = True) -> Iterator[None]:
+    """Within the block, a child compiles the search's kernels if any is not cached (and
+    ``enabled``); the block's end compiles the NDT levels' kernel and waits for the child. An
+    error in the block stops the child."""
+    cold = enabled and not all(cached(d) for d in search_dispatchers())
+    child = _start_child() if cold else None
     try:
         yield
         if child is not None and not all(cached(d) for d in level_dispatchers()):
             compile_level_kernels()
     except BaseException:
         if child is not None:
-            child.kill()
-            child.wait()
+            _stop(child)
         raise
     if child is not None:
         try:
             child.wait(timeout=WAIT_S)
         except subprocess.TimeoutExpired:
-            child.kill()
-            child.wait()
+            _stop(child)
 
 
 def _walls(rng: np.random.Generator, n: int) -> list[np.ndarray]:
