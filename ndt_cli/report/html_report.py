@@ -68,10 +68,8 @@ def _link_row(result: ChainResult, link: Link, fit: LinkFit) -> LinkRow:
     )
 
 
-def chain_report(
-    result: ChainResult, config_yaml: str, runtime_s: float, topview: bytes | None
-) -> str:
-    """The HTML report of an ``ndt-chain`` run."""
+def chain_report(result: ChainResult, config_yaml: str, runtime_s: float, topview: bytes) -> str:
+    """The HTML report of an ``ndt-chain`` run, with its top view (PNG bytes)."""
     sol = result.solution
     not_ok = [result.names[k] for k, s in enumerate(sol.scans) if s.status.value != "ok"]
     verdict = Verdict(
@@ -87,7 +85,6 @@ def chain_report(
         ("loop radius", "none" if np.isnan(result.loop_radius) else f"{result.loop_radius:.1f} m"),
         ("run time", f"{runtime_s:.1f} s"),
     )
-    figures = () if topview is None else (Figure(topview, _TOPVIEW),)
     return _render(
         verdict=verdict,
         summary=summary,
@@ -96,7 +93,7 @@ def chain_report(
             for k, (n, s) in enumerate(zip(result.names, sol.scans, strict=True))
         ),
         links=tuple(_link_row(result, k, f) for k, f in zip(result.links, sol.links, strict=True)),
-        figures=figures,
+        figures=(Figure(topview, _TOPVIEW),),
         config_yaml=config_yaml,
         notes=_NOTES,
     )
