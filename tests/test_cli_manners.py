@@ -172,3 +172,37 @@ def test_usage_errors_are_one_line(tmp_path):
         res = runner.invoke(chain_app, args, prog_name="ndt-chain")
         lines = res.stderr.strip().splitlines()
         assert res.exit_code == 2 and len(lines) == 1 and lines[0].startswith("ndt-chain: error:")
+
+
+def test_a_command_collects_rarely_and_restores_the_collector():
+    import gc
+
+    from ndt_cli.cli.common import OLD_COLLECTIONS, YOUNG_COLLECTION, collector_for_a_command
+
+    before = gc.get_threshold()
+    with collector_for_a_command():
+        assert gc.get_threshold() == (YOUNG_COLLECTION, *OLD_COLLECTIONS)
+        assert gc.isenabled()  # cycles are still collected
+    assert gc.get_threshold() == before
+
+
+def test_the_objects_left_at_exit_are_frozen_before_the_last_collection():
+    """A handler registered before the command runs after the command's (atexit runs them last
+    in, first out): by then every object is frozen, so the interpreter's last collection skips
+    them. Without the command, nothing is frozen."""
+    probe = (
+        "import atexit, gc, sys\n"
+        "atexit.register(lambda: print(gc.get_freeze_count()))\n"
+        "from ndt_cli.cli.common import collector_for_a_command\n"
+        "if sys.argv[1] == 'command':\n"
+        "    with collector_for_a_command():\n"
+        "        pass\n"
+    )
+    counts = {}
+    for mode in ("command", "none"):
+        run = subprocess.run(
+            [sys.executable, "-c", probe, mode], capture_output=True, text=True, check=True
+        )
+        counts[mode] = int(run.stdout.strip())
+    assert counts["none"] == 0
+    assert counts["command"] > 10_000  # the imports' objects, at least
