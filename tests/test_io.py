@@ -165,10 +165,46 @@ def test_chunked_las_matches_one_shot_read(
     path = _las(tmp_path / f"big{suffix}", pts, scale=0.01, offsets=(1000.0, 5e6, 0.0))
     las = laspy.read(path)
     expected = np.column_stack([las.x, las.y, las.z])
-    got = np.concatenate(list(LasReader().iter_xyz(path, 999)))
-    assert las_chunks == [(999, 999)] * 10 + [(999, 10)]
+    chunks = list(LasReader().iter_xyz(path, 999))
+    assert [len(c) for c in chunks] == [999] * 10 + [10]
+    # LAZ is decompressed by laspy chunk by chunk; LAS records are mapped from the file, never
+    # copied through laspy's reader
+    assert las_chunks == ([(999, 999)] * 10 + [(999, 10)] if suffix == ".laz" else [])
+    got = np.concatenate(chunks)
     np.testing.assert_array_equal(got, expected)
     assert np.abs(got - pts).max() <= 0.005 + 1e-9
+
+
+@pytest.mark.parametrize(
+    ("point_format", "extra"), [(0, False), (1, True), (3, False), (6, True), (7, False), (8, True)]
+)
+def test_mapped_las_records_scale_exactly_as_laspy(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, point_format: int, extra: bool
+) -> None:
+    """Records of every size (with extra bytes, after a variable-length record that moves the
+    point data to an odd offset), georeferenced offsets, blocks smaller than the file: the
+    coordinates are laspy's own, bit for bit, whole or in chunks."""
+    monkeypatch.setattr(formats, "SCALE_BLOCK", 7)
+    rng = np.random.default_rng(point_format)
+    header = laspy.LasHeader(point_format=point_format, version="1.4")
+    header.scales = np.array([0.001, 0.002, 0.0005])
+    header.offsets = np.array([4.5e5 + 0.3, 5.4e6 - 0.7, 97.25])
+    if extra:
+        header.add_extra_dim(laspy.ExtraBytesParams(name="range", type=np.float32))
+    header.vlrs.append(laspy.VLR("ndt", 1, "odd", b"x" * (14 if extra else 13)))
+    las = laspy.LasData(header)
+    n = 1000
+    las.x = header.offsets[0] + rng.uniform(-300, 300, n)
+    las.y = header.offsets[1] + rng.uniform(-300, 300, n)
+    las.z = header.offsets[2] + rng.uniform(-20, 20, n)
+    las.intensity = rng.integers(0, 65535, n)
+    path = tmp_path / "records.las"
+    las.write(str(path))
+    ref = laspy.read(path)
+    assert ref.header.offset_to_point_data % 8 != 0
+    expected = np.column_stack([ref.x, ref.y, ref.z])
+    np.testing.assert_array_equal(LasReader().read_xyz(path), expected)
+    np.testing.assert_array_equal(np.concatenate(list(LasReader().iter_xyz(path, 333))), expected)
 
 
 def test_read_chunks_streams_las_and_drops_unusable_points(tmp_path: Path) -> None:
@@ -210,7 +246,7 @@ def test_read_uses_module_chunk_size(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, las_chunks: list[tuple[int, int]]
 ) -> None:
     pts = _points(5000, seed=3)
-    path = _las(tmp_path / "c.las", pts)
+    path = _las(tmp_path / "c.laz", pts)  # LAZ: laspy decompresses it chunk by chunk
     monkeypatch.setattr(formats, "LAS_CHUNK_SIZE", 2000)
     cloud = ndt_io.read(path)
     assert las_chunks == [(2000, 2000), (2000, 2000), (2000, 1000)]
