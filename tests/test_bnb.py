@@ -96,6 +96,33 @@ def test_max_pyramid_is_the_block_maximum():
                 np.testing.assert_array_equal(pyramid[h, :, a, b], expect)
 
 
+@pytest.mark.parametrize(("sigma_px", "resolution"), [(1.0, 1.0), (0.7, 0.5), (1.6, 2.0)])
+def test_likelihood_field_is_the_gaussian_of_the_distance_transform(sigma_px, resolution):
+    """Against scipy's exact Euclidean distance transform: 255 on a target pixel, 255
+    exp(-d^2 / 2 sigma^2) rounded at the distance d to the nearest one; an empty slice and a
+    slice of one point included."""
+    from scipy import ndimage
+
+    rng = np.random.default_rng(7)
+    slices = [*_walls(rng, 200), np.zeros((0, 2)), np.array([[3.2, -4.9]])]
+    field = bnb.likelihood_field(slices, resolution=resolution, sigma_px=sigma_px)
+    assert field.values.shape[0] == len(slices)
+    for k, s in enumerate(slices):
+        held = np.zeros(field.values.shape[1:], bool)
+        lo = np.rint(field.origin / resolution).astype(np.int64)  # origin: whole pixels
+        ij = np.floor(s / resolution).astype(np.int64) - lo
+        held[ij[:, 0], ij[:, 1]] = True
+        if not held.any():
+            assert not field.values[k].any()
+            continue
+        d = ndimage.distance_transform_edt(~held)
+        expect = np.rint(255 * np.exp(-0.5 * (d / sigma_px) ** 2)).astype(np.uint8)
+        np.testing.assert_array_equal(field.values[k], expect)
+        assert (field.values[k][held] == 255).all()
+        border = np.concatenate([expect[0], expect[-1], expect[:, 0], expect[:, -1]])
+        assert not border.any()  # the margin holds the whole fall-off
+
+
 @pytest.mark.parametrize("seed", [1, 2])
 def test_node_bound_covers_every_translation_of_its_block(seed):
     rng = np.random.default_rng(seed)

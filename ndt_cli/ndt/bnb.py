@@ -90,9 +90,7 @@ def likelihood_field(
     target_slices: Sequence[np.ndarray], *, resolution: float = 1.0, sigma_px: float = 1.0
 ) -> ScoreField:
     """Per slice: 255 on every pixel holding a target point, ``255 exp(-d^2 / 2 sigma^2)`` at
-    ``d`` pixels from the nearest such pixel (rounded; 0 beyond ~3.3 sigma)."""
-    from scipy import ndimage  # here, not at start-up: a command that never searches skips it
-
+    ``d`` pixels from the nearest such pixel (rounded; 0 beyond ~3.5 sigma)."""
     if resolution <= 0 or sigma_px <= 0:
         raise ValueError("need resolution > 0 and sigma_px > 0")
     xy = [np.reshape(s, (-1, 2)) for s in target_slices]
@@ -104,15 +102,28 @@ def likelihood_field(
     lo = np.floor(low / resolution).astype(np.int64) - pad
     shape = np.floor(high / resolution).astype(np.int64) + pad - lo + 1
     values = np.zeros((len(xy), *shape), np.uint8)
+    dx, dy, falloff = _falloff(sigma_px)
     for k, s in enumerate(xy):
-        if len(s) == 0:
-            continue
         ij = np.floor(s / resolution).astype(np.int64) - lo
-        empty = np.ones(shape, bool)
-        empty[ij[:, 0], ij[:, 1]] = False
-        d = ndimage.distance_transform_edt(empty)
-        values[k] = np.rint(FIELD_MAX * np.exp(-0.5 * (d / sigma_px) ** 2)).astype(np.uint8)
+        held = np.unique(ij[:, 0] * shape[1] + ij[:, 1])
+        flat = values[k].reshape(-1)  # a view: written in place
+        for step, v in zip(dx * shape[1] + dy, falloff, strict=True):
+            flat[held + step] = np.maximum(flat[held + step], v)
     return ScoreField(values, lo * resolution, resolution, _centre(target_slices))
+
+
+def _falloff(sigma_px: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pixel offsets (dx, dy) whose field value is not 0, and the value: ``255 exp(-d^2 / 2
+    sigma^2)`` rounded, ``d = sqrt(dx^2 + dy^2)``. The value falls with the distance, so a pixel's
+    value is the largest over the target pixels within reach: that of the nearest, as a
+    Euclidean distance transform would give it, computed from the same ``d``. Every offset with a
+    non-zero value lies within :data:`FIELD_REACH` sigmas, inside the field's margin."""
+    r = int(np.ceil(FIELD_REACH * sigma_px))
+    dx, dy = (a.ravel() for a in np.meshgrid(np.arange(-r, r + 1), np.arange(-r, r + 1)))
+    d = np.sqrt((dx * dx + dy * dy).astype(np.float64))
+    v = np.rint(FIELD_MAX * np.exp(-0.5 * (d / sigma_px) ** 2)).astype(np.uint8)
+    keep = v > 0
+    return dx[keep], dy[keep], v[keep]
 
 
 def max_pyramid(values: np.ndarray, top: int) -> np.ndarray:
