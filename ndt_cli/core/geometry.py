@@ -4,18 +4,38 @@ the dominant "up" direction of a scan."""
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from dataclasses import dataclass
 
 import numpy as np
 
-from ndt_cli.core.planes import local_planes
-from ndt_cli.core.threads import threads
-
-if TYPE_CHECKING:
-    from scipy.spatial import cKDTree
+from ndt_cli.core import neighbours
+from ndt_cli.core.neighbours import CellGrid, NeighbourKernels
+from ndt_cli.core.planes import local_planes, local_planes_numpy
 
 Planes = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]  # local_planes' type
 VOXEL_OFFSET = 1 << 20  # voxel indices are packed as 21-bit fields: +-1e6 voxels from origin
+CELLS_PER_VOXEL = 10  # a neighbour grid's cell in voxels of its points: the fastest queries
+
+
+@dataclass(frozen=True)
+class Surfaces:
+    """What finds local surfaces in 3D points: a neighbour grid with its queries
+    (:mod:`ndt_cli.core.neighbours`) and the planes of neighbourhoods
+    (:mod:`ndt_cli.core.planes`); the compiled kernels or their numpy twins."""
+
+    neighbours: NeighbourKernels
+    planes: Planes
+
+    def grid(self, points: np.ndarray, voxel: float) -> CellGrid:
+        """A neighbour grid of points thinned to one per ``voxel`` metres."""
+        return self.neighbours.grid(points, CELLS_PER_VOXEL * voxel)
+
+    def __repr__(self) -> str:
+        return f"Surfaces({self.neighbours!r}, {self.planes.__name__})"
+
+
+SURFACES = Surfaces(neighbours.NUMBA, local_planes)
+SURFACES_NUMPY = Surfaces(neighbours.NUMPY, local_planes_numpy)
 
 
 def voxel_keys(points: np.ndarray, voxel: float) -> np.ndarray:
@@ -80,21 +100,14 @@ def voxel_thin(points: np.ndarray, voxel: float) -> np.ndarray:
     return thinner.result()
 
 
-def query_threads() -> int:
-    """Threads of a k-d tree query: the process's kernel thread budget (all cores unless set; a
-    chain's worker sets it to its share of the cores), so that parallel workers do not each
-    start a thread per core."""
-    return threads()
-
-
 def normals(
-    points: np.ndarray, tree: cKDTree, k: int = 12, planes: Planes = local_planes
+    points: np.ndarray, grid: CellGrid, k: int = 12, surfaces: Surfaces = SURFACES
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Unit normals from the covariance of each point's ``k`` neighbours in ``tree``, and a
-    planarity in [0, 1] (1 - smallest/middle eigenvalue) to drop points without a clear plane
-    (:mod:`ndt_cli.core.planes`; ``planes``: the kernel or its numpy twin)."""
-    _, idx = tree.query(points, k=k, workers=query_threads())
-    return planes(np.asarray(tree.data), idx)
+    """Unit normals from the covariance of each point's ``k`` nearest neighbours in ``grid``,
+    and a planarity in [0, 1] (1 - smallest/middle eigenvalue) to drop points without a clear
+    plane (:mod:`ndt_cli.core.planes`)."""
+    _, idx = surfaces.neighbours.knn(grid, points, k)
+    return surfaces.planes(grid.data, idx)
 
 
 def dominant_up(
@@ -102,7 +115,7 @@ def dominant_up(
     voxel: float = 0.25,
     max_tilt_deg: float = 25.0,
     sample: int = 20_000,
-    planes: Planes = local_planes,
+    surfaces: Surfaces = SURFACES,
 ) -> np.ndarray:
     """Unit normal (frame of ``points``) shared by most of the roughly horizontal surfaces.
 
@@ -111,15 +124,14 @@ def dominant_up(
     ``max_tilt_deg`` of +z are averaged inside a cone that narrows from 10 to 2.5 degrees around
     the current estimate. Returns +z when there are too few planar, roughly horizontal points.
     """
-    from scipy.spatial import cKDTree  # here: a pair imports it while its other scan is read
-
     up = np.array([0.0, 0.0, 1.0])
     thin = voxel_thin(points, voxel)
     if len(thin) < 50:
         return up
-    tree = cKDTree(thin, balanced_tree=False, compact_nodes=False)  # builds in half the time
     k = min(10, len(thin))
-    n, planarity = normals(thin[:: max(1, len(thin) // sample)], tree, k, planes)
+    n, planarity = normals(
+        thin[:: max(1, len(thin) // sample)], surfaces.grid(thin, voxel), k, surfaces
+    )
     n = n * np.where(n[:, 2] < 0, -1.0, 1.0)[:, None]
     n = n[(planarity > 0.7) & (n[:, 2] > np.cos(np.radians(max_tilt_deg)))]
     if len(n) < 20:

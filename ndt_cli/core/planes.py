@@ -1,7 +1,7 @@
 """Local planes of 3D points: the normal and planarity of each point's neighbourhood (Numba),
 with a plain-numpy twin that the tests compare.
 
-The neighbourhood of point i is the rows ``idx[i]`` of ``data`` (a k-d tree's k nearest, any
+The neighbourhood of point i is the rows ``idx[i]`` of ``data`` (the k nearest, any
 frame, metres). Its covariance (divided by k) has eigenvalues w0 <= w1 <= w2; the normal is the
 unit eigenvector of w0 (its sign is arbitrary: ICP's point-to-plane terms and the levelling do
 not depend on it), the planarity ``1 - w0 / w1`` is near 1 on a plane and near 0 on a line's or

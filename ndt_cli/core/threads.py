@@ -6,7 +6,7 @@ Numba's own parallel loops would do the same, but each costs one to three second
 compile on an empty cache, and the first run of the command would pay for all of them.
 
 A task writes only its own outputs, so results are bit-identical whatever the number of threads.
-The budget also bounds the threads of k-d tree queries. It starts at ``NUMBA_NUM_THREADS`` when
+The budget also bounds the threads of neighbour queries. It starts at ``NUMBA_NUM_THREADS`` when
 set, else the cores this process may use; a chain's worker lowers it to its share of the cores.
 """
 
@@ -38,7 +38,7 @@ _pool_size = 0
 
 
 def threads() -> int:
-    """Threads the kernels and k-d tree queries of this process may use (at least 1)."""
+    """Threads the kernels and neighbour queries of this process may use (at least 1)."""
     return _budget
 
 

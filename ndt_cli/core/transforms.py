@@ -51,12 +51,51 @@ def apply(T: np.ndarray, points: np.ndarray) -> np.ndarray:
     return points @ T[:3, :3].T + T[:3, 3]
 
 
-def rotation_to_quaternion(R: np.ndarray) -> np.ndarray:
-    """Unit quaternion (w, x, y, z) of a 3x3 rotation matrix."""
-    from scipy.spatial.transform import Rotation
+def quaternions(R: np.ndarray) -> np.ndarray:
+    """(N,4) unit quaternions (w, x, y, z), w >= 0, of (N,3,3) rotation matrices, from the
+    largest of the four diagonal forms (Shepperd's method: accurate at every angle, up to and
+    at 180 degrees)."""
+    R = np.asarray(R, dtype=float).reshape(-1, 3, 3)
+    d = np.stack([R[:, 0, 0] + R[:, 1, 1] + R[:, 2, 2], R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]], 1)
+    case = np.argmax(d, axis=1)
+    q = np.empty((len(R), 4))
+    s0, s1, s2 = R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]
+    p0, p1, p2 = R[:, 0, 1] + R[:, 1, 0], R[:, 0, 2] + R[:, 2, 0], R[:, 1, 2] + R[:, 2, 1]
+    tr = d[:, 0]
+    forms = [
+        (1.0 + tr, (s0, s1, s2), 0),
+        (1.0 + 2 * d[:, 1] - tr, (s0, p0, p1), 1),
+        (1.0 + 2 * d[:, 2] - tr, (s1, p0, p2), 2),
+        (1.0 + 2 * d[:, 3] - tr, (s2, p1, p2), 3),
+    ]
+    for k, (big, others, slot) in enumerate(forms):
+        m = case == k
+        if not m.any():
+            continue
+        root = np.sqrt(np.maximum(big[m], 0.0))  # 4 q[slot]^2 = big
+        rest = [i for i in range(4) if i != slot]
+        q[m, slot] = 0.5 * root
+        for i, value in zip(rest, others, strict=True):
+            q[m, i] = 0.5 * value[m] / root
+    q *= np.where(q[:, 0] < 0, -1.0, 1.0)[:, None]
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
 
-    x, y, z, w = Rotation.from_matrix(R).as_quat()
-    return np.array([w, x, y, z])
+
+def rotation_to_quaternion(R: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z), w >= 0, of a 3x3 rotation matrix."""
+    return quaternions(R)[0]
+
+
+def rotation_from_vector(v: np.ndarray) -> np.ndarray:
+    """3x3 rotation of the rotation vector ``v`` (axis times angle, rad): Rodrigues' formula,
+    with ``1 - cos t`` as ``2 sin^2(t/2)`` so that small angles keep their precision."""
+    v = np.asarray(v, dtype=float)
+    t = float(np.sqrt(v @ v))
+    K = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    if t < 1e-12:  # the series to second order is exact in double precision here
+        return np.eye(3) + K + 0.5 * (K @ K)
+    h = np.sin(0.5 * t) / t
+    return np.eye(3) + (np.sin(t) / t) * K + (2.0 * h * h) * (K @ K)
 
 
 def levelling_rotation(a: float, b: float) -> np.ndarray:

@@ -12,8 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ndt_cli.core import planes
-from ndt_cli.core.geometry import Planes
+from ndt_cli.core.geometry import SURFACES, SURFACES_NUMPY, Surfaces
 from ndt_cli.ndt import bnb_kernels, kernels, passes
 from ndt_cli.ndt.bnb_kernels import SearchKernels
 from ndt_cli.ndt.grid import NDTMap
@@ -29,7 +28,7 @@ class Kernels:
     point_scores: Callable[[NDTMap, SourcePoints, np.ndarray], tuple[np.ndarray, np.ndarray]]
     slice_pass: Callable[..., tuple]
     search: SearchKernels  # the branch and bound of the global search
-    planes: Planes  # normals and planarity of 3D neighbourhoods (levelling, ICP)
+    surfaces: Surfaces  # neighbours, normals and planarity in 3D (levelling, ICP)
 
     def __repr__(self) -> str:
         return f"Kernels({self.name})"
@@ -41,7 +40,7 @@ NUMBA = Kernels(
     kernels.point_scores,
     passes.slice_pass,
     bnb_kernels.NUMBA,
-    planes.local_planes,
+    SURFACES,
 )
 NUMPY = Kernels(
     "numpy",
@@ -49,5 +48,5 @@ NUMPY = Kernels(
     kernels.point_scores_numpy,
     passes.slice_pass_numpy,
     bnb_kernels.NUMPY,
-    planes.local_planes_numpy,
+    SURFACES_NUMPY,
 )

@@ -19,8 +19,7 @@ import numpy as np
 
 from ndt_cli.config.rules import axes_matrix
 from ndt_cli.config.schema import Config, GroundConfig, InputConfig, SlicesConfig
-from ndt_cli.core.geometry import Planes, VoxelThinner, dominant_up
-from ndt_cli.core.planes import local_planes
+from ndt_cli.core.geometry import SURFACES, Surfaces, VoxelThinner, dominant_up
 from ndt_cli.core.transforms import (
     levelling_rotation,
     rotation4,
@@ -206,7 +205,7 @@ def reduction_and_level(
     hi: np.ndarray,
     sample: np.ndarray,
     ground: GroundConfig,
-    planes: Planes = local_planes,
+    surfaces: Surfaces = SURFACES,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Reduction point (scanner frame, m) and levelling rotation of a scan from its bounding
     box and a sample of its points: coarse levelling from the dominant up direction (tilts of
@@ -217,7 +216,7 @@ def reduction_and_level(
     rel = sample - centre
     level = np.eye(3)
     if ground.level:
-        u = dominant_up(rel, planes=planes)
+        u = dominant_up(rel, surfaces=surfaces)
         level = levelling_rotation(-u[0] / u[2], -u[1] / u[2])
         rel = rel @ level.T
     offset = np.array([0.0, 0.0, estimate_ground(rel[:, 2], ground.bin_size)])
@@ -273,7 +272,9 @@ def prepare_chunks(
     (``icp_voxel`` m, 0: no ICP points). Fewer than ``min_points`` slice points is an error.
     """
     first = _first_pass(scan, inp or InputConfig())
-    reduction, level = reduction_and_level(first.lo, first.hi, first.sample, ground, kernels.planes)
+    reduction, level = reduction_and_level(
+        first.lo, first.hi, first.sample, ground, kernels.surfaces
+    )
     cut, thin = _second_pass(scan, reduction, level, slices, icp_voxel, kernels)
     if sum(len(s) for s in cut) < min_points:
         raise InputError(
@@ -316,12 +317,10 @@ def load_and_prepare(
 
 def _load_runtime(kernels: Kernels) -> None:
     """Load what preparing a scan needs once per process: Numba's runtime (its first call of a
-    cached kernel takes about half a second, almost all of it holding the GIL) and scipy's k-d
-    tree. Run in a helper thread while the files are read, it overlaps the reads, which spend
-    their time in the disk and in numpy. A failure here is left to the real call to report."""
+    cached kernel takes about a fifth of a second, almost all of it holding the GIL). Run in a
+    helper thread while the files are read, it overlaps the reads, which spend their time in
+    the disk and in numpy. A failure here is left to the real call to report."""
     try:
-        import scipy.spatial  # noqa: F401  (first: the levelling needs it before any kernel)
-
         kernels.slice_pass(np.zeros((1, 3)), np.zeros(3), np.eye(3), [0.0], 0.1, 0.1)
     except Exception:  # the same call fails again where its error is reported
         return

@@ -3,7 +3,8 @@
 Works on voxel-thinned 3D points in the target's reduced frame (metres). Target normals come
 from the local covariance of each point's neighbours; residuals are point-to-plane distances,
 weighted by Huber's function; the correspondence distance shrinks from ``max_distance`` to
-``min_distance``. Vectorised with scipy's cKDTree; no per-point Python loops.
+``min_distance``. Correspondences and neighbourhoods come from a grid of the target's points
+(:mod:`ndt_cli.core.neighbours`, exact nearest neighbours); no per-point Python loops.
 """
 
 from __future__ import annotations
@@ -13,9 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ndt_cli.config.schema import RefineConfig
-from ndt_cli.core.geometry import Planes, normals, query_threads, voxel_thin
-from ndt_cli.core.planes import local_planes
-from ndt_cli.core.transforms import transform_errors, translation
+from ndt_cli.core.geometry import SURFACES, Surfaces, normals, voxel_thin
+from ndt_cli.core.transforms import rotation_from_vector, transform_errors, translation
 
 _MIN_PLANARITY = 0.7  # target points whose neighbourhood is not clearly planar are not used
 
@@ -60,24 +60,22 @@ def icp(
     T0: np.ndarray,
     *,
     voxel: float | None = 0.1,
+    spacing: float = 0.1,
     max_distance: float = 1.0,
     min_distance: float = 0.1,
     iterations: int = 40,
     huber: float = 0.02,
     max_source_points: int = 20_000,
     overlap_distance: float = 0.2,
-    planes: Planes = local_planes,
+    surfaces: Surfaces = SURFACES,
 ) -> IcpResult:
     """Refine ``T0`` (source -> target) by robust point-to-plane ICP. ``voxel=None``: the
-    points are thinned already. Target normals are computed for the points ICP reaches only."""
-    from scipy.spatial import cKDTree
-    from scipy.spatial.transform import Rotation
-
+    points are thinned already, to about ``spacing`` metres (it sizes the target's grid).
+    Target normals are computed for the points ICP reaches only."""
     tgt = target if voxel is None else voxel_thin(target, voxel)
     src = source if voxel is None else voxel_thin(source, voxel)
     src = src[:: max(1, len(src) // max_source_points)]  # a regular stride: deterministic
-    tree = cKDTree(tgt, balanced_tree=False, compact_nodes=False)  # builds in half the time
-    threads = query_threads()
+    grid = surfaces.grid(tgt, spacing if voxel is None else voxel)
     n = np.zeros((len(tgt), 3))
     planarity = np.full(len(tgt), np.nan)  # NaN: not computed yet
     T = np.array(T0, dtype=float)
@@ -88,11 +86,11 @@ def icp(
     pi = ni = w = np.zeros((0, 3))
     for it in range(1, iterations + 1):  # noqa: B007
         p = src @ T[:3, :3].T + T[:3, 3]
-        d, j = tree.query(p, distance_upper_bound=dist, workers=threads)
+        d, j = surfaces.neighbours.nearest(grid, p, dist)
         ok = np.isfinite(d)
         need = np.unique(j[ok][np.isnan(planarity[j[ok]])])
         if len(need):
-            n[need], planarity[need] = normals(tgt[need], tree, planes=planes)
+            n[need], planarity[need] = normals(tgt[need], grid, surfaces=surfaces)
         ok[ok] &= planarity[j[ok]] > _MIN_PLANARITY
         if ok.sum() < 6:
             break
@@ -104,7 +102,7 @@ def icp(
         g = (J * w[:, None]).T @ r
         x = -np.linalg.solve(H + 1e-9 * np.eye(6), g)
         dT = np.eye(4)
-        dT[:3, :3] = Rotation.from_rotvec(x[:3]).as_matrix()
+        dT[:3, :3] = rotation_from_vector(x[:3])
         dT[:3, 3] = x[3:]
         T = dT @ T
         inlier = np.abs(r) <= 3 * huber
@@ -119,9 +117,7 @@ def icp(
     if len(pi):  # the curvature about the matched points' centroid: independent of the frame
         J = np.column_stack([np.cross(pi - centroid, ni), ni])
         H = (J * w[:, None]).T @ J
-    d, _ = tree.query(
-        src @ T[:3, :3].T + T[:3, 3], distance_upper_bound=overlap_distance, workers=threads
-    )
+    d, _ = surfaces.neighbours.nearest(grid, src @ T[:3, :3].T + T[:3, 3], overlap_distance)
     return IcpResult(T, rms, inliers, it, H, float(np.isfinite(d).mean()), centroid)
 
 
@@ -143,7 +139,7 @@ def refine_pose(
     T: np.ndarray,
     refine: RefineConfig,
     overlap_distance: float,
-    planes: Planes = local_planes,
+    surfaces: Surfaces = SURFACES,
 ) -> Refinement:
     """ICP of the scans' thinned points (each minus its reduction point) from ``T``; a
     correction larger than ``refine.max_correction`` (m, or degrees) is not applied."""
@@ -155,12 +151,13 @@ def refine_pose(
         source_points,
         T_red,
         voxel=None,
+        spacing=refine.voxel,
         max_distance=refine.max_distance,
         min_distance=refine.min_distance,
         huber=refine.huber,
         iterations=refine.iterations,
         overlap_distance=overlap_distance,
-        planes=planes,
+        surfaces=surfaces,
     )
     moved_deg, moved_m = transform_errors(res.T, T_red)
     if (

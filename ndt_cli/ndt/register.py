@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ndt_cli.config.schema import Config, SearchConfig
-from ndt_cli.core.geometry import Planes
+from ndt_cli.core.geometry import Surfaces
 from ndt_cli.core.transforms import pose2d_matrix, yaw_of
 from ndt_cli.ndt.backend import NUMBA, Kernels
 from ndt_cli.ndt.coarse_to_fine import Ranked, coarse_to_fine, rank, with_verification
@@ -119,7 +119,7 @@ def _refine(
     T: np.ndarray,
     ok: bool,
     cfg: Config,
-    planes: Planes,
+    surfaces: Surfaces,
 ) -> Refinement:
     """ICP from the NDT result ``T`` when it is asked for and NDT found a converged overlap
     (``ok``)."""
@@ -133,7 +133,7 @@ def _refine(
         T,
         cfg.refine,
         cfg.quality.overlap_distance,
-        planes,
+        surfaces,
     )
 
 
@@ -206,7 +206,7 @@ def register_prepared(
     converged = bool(ranked.converged[0]) if picked else refined.converged
     T = target.from_local() @ pose2d_matrix(*ranked.poses[0]) @ source.to_local()
     t_ndt = time.perf_counter() - t_start
-    refinement = _refine(target, source, T, fit.score > 0.0 and converged, cfg, kernels.planes)
+    refinement = _refine(target, source, T, fit.score > 0.0 and converged, cfg, kernels.surfaces)
     moved = _planar(target, source, refinement.T) if refinement.icp is not None else None
     after = None if moved is None else measure_fit(gate_map, gate_points, moved, 0.0, kernels)
     verdict = judge(fit, converged, refinement, target.level, cfg.quality, after, picked)

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ndt_cli.core.transforms import rotation4, translation
+from ndt_cli.core.transforms import quaternions, rotation4, translation
 
 DEFAULT_INFLATION = 3.0  # ICP: factor on the inlier RMS (correlated points, model errors)
 DEFAULT_FLOOR_ROTATION_DEG = 0.005  # systematic rotation error floor (1 sigma), degrees
@@ -192,33 +192,10 @@ def sqrt_information(covariance: np.ndarray) -> np.ndarray:
 
 
 def rotation_log(R: np.ndarray) -> np.ndarray:
-    """(N,3) rotation vectors (rad) of (N,3,3) rotation matrices, through the unit quaternion
-    of the largest of its four diagonal forms (Shepperd's method: accurate at every angle, up
-    to and at 180 degrees)."""
-    R = np.asarray(R, dtype=float).reshape(-1, 3, 3)
-    d = np.stack([R[:, 0, 0] + R[:, 1, 1] + R[:, 2, 2], R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]], 1)
-    case = np.argmax(d, axis=1)
-    q = np.empty((len(R), 4))  # (w, x, y, z)
-    s0, s1, s2 = R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]
-    p0, p1, p2 = R[:, 0, 1] + R[:, 1, 0], R[:, 0, 2] + R[:, 2, 0], R[:, 1, 2] + R[:, 2, 1]
-    tr = d[:, 0]
-    forms = [
-        (1.0 + tr, (s0, s1, s2), 0),
-        (1.0 + 2 * d[:, 1] - tr, (s0, p0, p1), 1),
-        (1.0 + 2 * d[:, 2] - tr, (s1, p0, p2), 2),
-        (1.0 + 2 * d[:, 3] - tr, (s2, p1, p2), 3),
-    ]
-    for k, (big, others, slot) in enumerate(forms):
-        m = case == k
-        if not m.any():
-            continue
-        root = np.sqrt(np.maximum(big[m], 0.0))  # 4 q[slot]^2 = big
-        rest = [i for i in range(4) if i != slot]
-        q[m, slot] = 0.5 * root
-        for i, value in zip(rest, others, strict=True):
-            q[m, i] = 0.5 * value[m] / root
-    q *= np.where(q[:, 0] < 0, -1.0, 1.0)[:, None]
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    """(N,3) rotation vectors (rad) of (N,3,3) rotation matrices, through their unit
+    quaternions (:func:`~ndt_cli.core.transforms.quaternions`: accurate at every angle, up to
+    and at 180 degrees)."""
+    q = quaternions(R)
     v = np.linalg.norm(q[:, 1:], axis=1)
     angle = 2.0 * np.arctan2(v, q[:, 0])
     scale = np.where(v > 1e-12, angle / np.where(v > 1e-12, v, 1.0), 2.0 / q[:, 0])
