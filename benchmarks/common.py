@@ -16,6 +16,14 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 PY = sys.executable
+RUN_VENV = ROOT / ".venv-run"
+"""The environment the commands are timed in as fresh processes: the runtime dependencies only,
+as ``pip install ndt-cli`` installs them (``make bench`` creates it). The development
+environment's extras change what every process imports: Open3D brings requests, which laspy
+then imports (+40-60 ms for any process that reads a LAS file, the bare read included), and
+scipy, a test reference, makes Numba import scipy.linalg when it starts (+0.1 s)."""
+RUN_BIN = RUN_VENV / "bin" if (RUN_VENV / "bin" / "ndt-register").exists() else BIN
+RUN_PY = str(RUN_BIN / "python")
 MEASURE = ROOT / "benchmarks" / "measure.py"
 TARGETS: list[list[str]] = []  # [what, measured, target, met], printed at the end of a run
 
@@ -60,8 +68,8 @@ def interleaved(cmds: list[list[str]], repeat: int) -> list[dict]:
 
 
 def python_c(code: str) -> list[str]:
-    """A fresh interpreter of this environment running ``code``."""
-    return [PY, "-c", code]
+    """A fresh interpreter of the commands' environment (:data:`RUN_BIN`) running ``code``."""
+    return [RUN_PY, "-c", code]
 
 
 def last_json(run: dict) -> dict:

@@ -15,8 +15,8 @@ import numpy as np
 
 from benchmarks import data
 from benchmarks.common import (
-    BIN,
-    PY,
+    RUN_BIN,
+    RUN_PY,
     fmt,
     interleaved,
     last_json,
@@ -30,8 +30,8 @@ from benchmarks.peers import errors
 from ndt_cli.io.matrices import read_matrix, read_pose_list
 
 OUT = data.CACHE / "results"
-REGISTER = str(BIN / "ndt-register")
-CHAIN = str(BIN / "ndt-chain")
+REGISTER = str(RUN_BIN / "ndt-register")
+CHAIN = str(RUN_BIN / "ndt-chain")
 IMPORT_REGISTER = "from ndt_cli.ndt.register import register"
 LASPY_READ = (
     "import sys, laspy, numpy as np\n"
@@ -101,7 +101,10 @@ def startup() -> None:
 def _importtime() -> list[tuple[int, str, float, float]]:
     """(depth, module, self ms, cumulative ms) of one ``-X importtime`` run, in its order."""
     run = subprocess.run(
-        [PY, "-X", "importtime", "-c", IMPORT_REGISTER], capture_output=True, text=True, check=True
+        [RUN_PY, "-X", "importtime", "-c", IMPORT_REGISTER],
+        capture_output=True,
+        text=True,
+        check=True,
     )
     out = []
     for line in run.stderr.splitlines():
@@ -156,7 +159,7 @@ def first_and_second(pairs: list[Pair]) -> None:
     (and any lazy imports), the second does not."""
     rows = []
     for p in pairs:
-        res = last_json(measured([PY, "-c", TWO_CALLS, str(p.a), str(p.b)]))
+        res = last_json(measured([RUN_PY, "-c", TWO_CALLS, str(p.a), str(p.b)]))
         first, second = res["calls"]
         rows.append([p.label, "import register", f"{res['import_s']:.2f}", "", "", "", ""])
         rows.append(_call_row(p.label, "first call", first))
@@ -197,7 +200,7 @@ def pair_fresh(pairs: list[Pair], repeat: int = 3) -> dict[str, float]:
     rows, best = [], {}
     for p in pairs:
         out = OUT / f"pair_{p.key}"
-        read_cmd = [PY, "-c", LASPY_READ, str(p.a), str(p.b)]
+        read_cmd = [RUN_PY, "-c", LASPY_READ, str(p.a), str(p.b)]
         reg, read, floor = interleaved([p.register_cmd(out), read_cmd, python_c(FLOOR)], repeat)
         rows.append(_pair_row(p, out, reg, read, floor))
         best[p.key] = reg["wall_s"]
@@ -309,7 +312,7 @@ def scaling(base: Path, sizes: list[int]) -> None:
     rows = []
     for n in sizes:
         f = data.tiled(base, n)
-        r = measured([PY, "-c", SCALING_CODE, str(f)])
+        r = measured([RUN_PY, "-c", SCALING_CODE, str(f)])
         inner = float(r["last"])
         rows.append(
             [

@@ -26,7 +26,7 @@ import numpy as np  # noqa: E402
 
 import ndt_cli  # noqa: E402
 from benchmarks import data, fresh, inprocess  # noqa: E402
-from benchmarks.common import TARGETS, cpu_mhz, table  # noqa: E402
+from benchmarks.common import PY, RUN_BIN, RUN_VENV, TARGETS, cpu_mhz, table  # noqa: E402
 from benchmarks.kernel import kernel_throughput  # noqa: E402
 from ndt_cli.config import Config  # noqa: E402
 from ndt_cli.core.threads import threads as kernel_threads  # noqa: E402
@@ -49,6 +49,9 @@ def header(files: list[Path], small: list[Path], mhz: float) -> None:
     for label, fs in (("full density", files), ("a tenth of the rays", small)):
         counts = ", ".join(f"{data.las_points(f) / 1e6:.2f}" for f in fs)
         print(f"data, {label}: {len(fs)} simulated street scans, {counts} M points (LAS)")
+    where, dev = RUN_BIN.parent.name, Path(PY).parent.parent.name
+    plain = " (the runtime dependencies only)" if RUN_BIN.parent == RUN_VENV else ""
+    print(f"fresh processes run in {where}{plain}; in-process sections in {dev}")
     print()
 
 
