@@ -371,16 +371,16 @@ def _shell_candidates(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(query, squared distance, point) of every point closer than ``bound`` in the cells of
     shell ``s`` around the queries ``rows``, skipping cells farther than their k-th kept."""
-    found: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     if len(rows) == 0:
         return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64)
+    found: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     c = f[rows] + OFFSET
     for off in _shell_offsets(s, (g.lo - c).min(axis=0), (g.hi - c).max(axis=0)):
-        cell = f[rows] + off
-        low = cell * g.cell
+        cells = f[rows] + off
+        low = cells * g.cell
         box = np.maximum(np.maximum(low - q[rows], q[rows] - (low + g.cell)), 0.0)
-        gap2 = (box * box).sum(axis=1)
-        ijk = cell + OFFSET
+        gap2 = box[:, 0] ** 2 + box[:, 1] ** 2 + box[:, 2] ** 2  # the kernel's order
+        ijk = cells + OFFSET
         inside = ((ijk >= g.lo) & (ijk <= g.hi)).all(axis=1)
         use = inside & (gap2 < bound * bound) & (gap2 <= d2[rows, -1])
         at, ijk = rows[use], ijk[use]
