@@ -28,6 +28,18 @@ def read_user_text(path: str | Path, what: str, error: type[NdtError] | None = N
         raise cls(f"cannot read {what} ({reason})", p) from None
 
 
+def caused_by_interrupt(exc: BaseException | None) -> bool:
+    """Whether Ctrl-C caused ``exc``: a KeyboardInterrupt, or an error raised while one was
+    handled (a compiled module interrupted in its import fails with ImportError)."""
+    seen: set[int] = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
 class NdtError(Exception):
     """Base of all user-facing errors; ``exit_code`` is what the CLI returns."""
 

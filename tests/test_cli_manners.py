@@ -206,3 +206,31 @@ def test_the_objects_left_at_exit_are_frozen_before_the_last_collection():
         counts[mode] = int(run.stdout.strip())
     assert counts["none"] == 0
     assert counts["command"] > 10_000  # the imports' objects, at least
+
+
+def _during_ctrl_c(error: Exception) -> Exception:
+    """``error`` raised while Ctrl-C was handled (a compiled module interrupted in its import
+    fails with ImportError)."""
+    error.__context__ = KeyboardInterrupt()
+    return error
+
+
+@pytest.mark.parametrize(
+    "error", [KeyboardInterrupt(), _during_ctrl_c(ImportError("initialization failed"))]
+)
+def test_ctrl_c_at_any_step_is_one_line_and_exit_130(error, capsys):
+    import typer
+
+    from ndt_cli.cli.common import user_errors
+
+    with pytest.raises(typer.Exit) as caught, user_errors("ndt-x", debug=False):
+        raise error
+    assert caught.value.exit_code == 130
+    assert capsys.readouterr().err.splitlines() == ["ndt-x: error: interrupted"]
+
+
+def test_a_bug_keeps_its_traceback():
+    from ndt_cli.cli.common import user_errors
+
+    with pytest.raises(ImportError, match="a bug"), user_errors("ndt-x", debug=False):
+        raise ImportError("a bug")

@@ -4,7 +4,11 @@ soon as its two scans are ready, without waiting for the slowest scan."""
 from __future__ import annotations
 
 import os
+import threading
+import time
+from concurrent.futures.process import _ExecutorManagerThread
 from functools import partial
+from pathlib import Path
 
 from conftest import added_task_order, after
 
@@ -33,3 +37,34 @@ def test_an_added_task_whose_worker_dies_fails_alone():
         pool.close()
     assert results["a"] == "a" and results["b"] == "b" and results["after"] == "after"
     assert "worker process died" in results["dies"]
+
+
+def _manager_threads() -> list[threading.Thread]:
+    return [t for t in threading.enumerate() if isinstance(t, _ExecutorManagerThread)]
+
+
+def _touch_after(path: Path, seconds: float) -> str:
+    time.sleep(seconds)
+    path.touch()
+    return path.name
+
+
+def test_closing_waits_for_the_tasks_held_and_cancels_the_rest(tmp_path):
+    """Python 3.11's exit hook writes to each pool's wake-up pipe while the pool's manager
+    thread may be closing it (a traceback after the command's last line), and a worker killed
+    while it sends a result hangs that thread: closing, after a run or in the middle of one,
+    waits for the workers and that thread instead of killing them."""
+    assert not _manager_threads()
+    done = WorkerPool(2, threads=1)
+    assert dict(done.run({"a": partial(after, "a", 0.0)})) == {"a": "a"}
+    assert _manager_threads()
+    done.close()
+    assert not _manager_threads()
+    busy = WorkerPool(1, threads=1)
+    tasks = {k: partial(_touch_after, tmp_path / str(k), 0.2) for k in range(12)}
+    running = busy.run(tasks)
+    assert next(running) == (0, "0")
+    busy.close()
+    assert not _manager_threads()
+    ran = len(list(tmp_path.iterdir()))
+    assert 2 <= ran < 6  # the tasks in the worker's hands finished, the others never started

@@ -10,7 +10,9 @@ import re
 import signal
 import subprocess
 import sys
+import threading
 import time
+from concurrent.futures.process import _ExecutorManagerThread
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +24,7 @@ from typer.testing import CliRunner
 from ndt_cli import config, io, sim
 from ndt_cli.cli import chain_app, register_app
 from ndt_cli.core.transforms import transform_errors
-from ndt_cli.errors import ConfigError, InputError
+from ndt_cli.errors import ConfigError, InputError, UserInterruptError
 from ndt_cli.io.matrices import read_matrix
 from ndt_cli.ndt.result import Status
 from ndt_cli.pipeline.chain import run_chain
@@ -211,6 +213,50 @@ def test_crashed_worker_fails_its_link_and_the_chain_completes(scans, tmp_path):
     for crashed in (by_pair[(1, 2)], by_pair[(0, 2)]):  # every link whose source kills
         assert crashed.status is Status.FAILED and "worker process died" in crashed.reason
     assert by_pair[(0, 1)].ok and by_pair[(2, 3)].ok  # the others are registered
+
+
+def _interrupted_import() -> ImportError:
+    """What a compiled module's import raises when Ctrl-C comes in the middle of it."""
+    err = ImportError("initialization failed")
+    err.__cause__ = KeyboardInterrupt()
+    return err
+
+
+class _BreaksAfterOneResult:
+    """Local workers, and a driver that breaks after the first result with ``error``."""
+
+    ships_data = True
+
+    def __init__(self, error: BaseException) -> None:
+        self.pool, self.ends, self.error = WorkerPool(2, threads=1), [], error
+
+    def start(self) -> None:
+        self.pool.start()
+
+    def run(self, tasks, then=None):
+        for item in self.pool.run(tasks, then):
+            yield item
+            raise self.error
+
+    def close(self) -> None:
+        self.ends.append("close")
+        self.pool.close()
+
+
+def test_an_error_in_the_run_closes_the_workers(scans, tmp_path):
+    pts, _ = scans
+    files = [_points(tmp_path / f"s{i}.laz", p) for i, p in enumerate(pts)]
+    for error, raised in [
+        (RuntimeError("a bug in the driver"), RuntimeError),
+        (KeyboardInterrupt(), UserInterruptError),
+        (_interrupted_import(), UserInterruptError),  # Ctrl-C while a module was imported
+    ]:
+        executor = _BreaksAfterOneResult(error)
+        with pytest.raises(raised) as caught:
+            run_chain(files, config.Config(), tmp_path / "o", executor=executor)
+        assert executor.ends == ["close"]
+        assert not [t for t in threading.enumerate() if isinstance(t, _ExecutorManagerThread)]
+        assert raised is RuntimeError or "--resume" in str(caught.value)
 
 
 CHAIN = [sys.executable, "-c", "from ndt_cli.cli import chain_app; chain_app()"]

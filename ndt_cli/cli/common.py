@@ -21,7 +21,7 @@ import typer
 from typer.core import TyperCommand, TyperGroup
 
 from ndt_cli.core.logs import PROGRESS
-from ndt_cli.errors import NdtError, UserInterruptError
+from ndt_cli.errors import NdtError, UserInterruptError, caused_by_interrupt
 
 try:  # typer >= 0.2x vendors click
     from typer._click.exceptions import ClickException
@@ -216,12 +216,14 @@ def user_errors(prog: str, debug: bool, interrupted: str = "interrupted") -> Ite
     the held messages when the block ends without one."""
     try:
         yield
-    except KeyboardInterrupt:
-        raise fail(UserInterruptError(interrupted), prog) from None
     except NdtError as exc:
         if debug:
             raise
         raise fail(exc, prog) from None
+    except BaseException as exc:
+        if not caused_by_interrupt(exc):
+            raise
+        raise fail(UserInterruptError(interrupted), prog) from None
     flush_messages()
 
 

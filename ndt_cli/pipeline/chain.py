@@ -27,7 +27,7 @@ import numpy as np
 
 from ndt_cli.config.loading import dump
 from ndt_cli.config.schema import Config
-from ndt_cli.errors import UserInterruptError
+from ndt_cli.errors import UserInterruptError, caused_by_interrupt
 from ndt_cli.ndt.prepare import PreparedScan
 from ndt_cli.pipeline.executors import Executor
 from ndt_cli.pipeline.links import Link, LinkStore, link_key
@@ -239,11 +239,13 @@ def _preview_or_problem(path: Path, cfg: Config) -> np.ndarray | str:
 
 @contextmanager
 def _stopping(run: _ChainRun) -> Iterator[None]:
-    """Ctrl-C stops the workers at once and keeps what finished; the executor is closed."""
+    """The executor is closed however the run ends. On Ctrl-C, what finished is kept; tasks
+    that have not started are cancelled, those running finish first (seconds)."""
     try:
         yield
-    except KeyboardInterrupt:
-        run.executor.terminate()
+    except BaseException as exc:
+        if not caused_by_interrupt(exc):
+            raise
         raise UserInterruptError(
             f"interrupted: {len(run.finished)} finished link(s) kept in {run.store.folder}; "
             "run again with --resume to continue"

@@ -89,9 +89,6 @@ class DaskPool:
             retries=self.retries,
         )
 
-    def terminate(self) -> None:
-        self.close()
-
     def close(self) -> None:
         self.client.close()
         if self._cluster is not None:
