@@ -26,7 +26,15 @@ import numpy as np  # noqa: E402
 
 import ndt_cli  # noqa: E402
 from benchmarks import data, fresh, inprocess  # noqa: E402
-from benchmarks.common import PY, RUN_BIN, RUN_VENV, TARGETS, cpu_mhz, table  # noqa: E402
+from benchmarks.common import (  # noqa: E402
+    PY,
+    RUN_BIN,
+    RUN_VENV,
+    TARGETS,
+    byte_compile_package,
+    cpu_mhz,
+    table,
+)
 from benchmarks.kernel import kernel_throughput  # noqa: E402
 from ndt_cli.config import Config  # noqa: E402
 from ndt_cli.core.threads import threads as kernel_threads  # noqa: E402
@@ -70,6 +78,7 @@ def main() -> int:
     pairs = [pair_of("full", files, poses_file), pair_of("small", small_files, small_poses)]
     mhz = cpu_mhz()
     header(files, small_files, mhz)
+    byte_compile_package()
     fresh.startup()
     fresh.import_profile()
     fresh.first_and_second(pairs)
