@@ -58,6 +58,17 @@ def unmatched_pair(folder: Path) -> tuple[Path, Path]:
     return a, b
 
 
+def during_ctrl_c(error: BaseException, direct: bool = True) -> BaseException:
+    """``error`` as Ctrl-C leaves it: caused by a KeyboardInterrupt (``direct``: a compiled
+    module interrupted in its import fails with ImportError from it), or raised while one was
+    handled."""
+    if direct:
+        error.__cause__ = KeyboardInterrupt()
+    else:
+        error.__context__ = KeyboardInterrupt()
+    return error
+
+
 def after(name: str, seconds: float) -> str:
     """A task for executors: ``name`` after ``seconds`` of sleep."""
     import time

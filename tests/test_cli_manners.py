@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from conftest import during_ctrl_c
 from typer.testing import CliRunner
 
 from ndt_cli import __version__
@@ -208,15 +209,13 @@ def test_the_objects_left_at_exit_are_frozen_before_the_last_collection():
     assert counts["command"] > 10_000  # the imports' objects, at least
 
 
-def _during_ctrl_c(error: Exception) -> Exception:
-    """``error`` raised while Ctrl-C was handled (a compiled module interrupted in its import
-    fails with ImportError)."""
-    error.__context__ = KeyboardInterrupt()
-    return error
-
-
 @pytest.mark.parametrize(
-    "error", [KeyboardInterrupt(), _during_ctrl_c(ImportError("initialization failed"))]
+    "error",
+    [
+        KeyboardInterrupt(),
+        during_ctrl_c(ImportError("initialization failed")),
+        during_ctrl_c(OSError("a write in a cleanup"), direct=False),
+    ],
 )
 def test_ctrl_c_at_any_step_is_one_line_and_exit_130(error, capsys):
     import typer

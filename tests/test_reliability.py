@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import during_ctrl_c
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
@@ -215,13 +216,6 @@ def test_crashed_worker_fails_its_link_and_the_chain_completes(scans, tmp_path):
     assert by_pair[(0, 1)].ok and by_pair[(2, 3)].ok  # the others are registered
 
 
-def _interrupted_import() -> ImportError:
-    """What a compiled module's import raises when Ctrl-C comes in the middle of it."""
-    err = ImportError("initialization failed")
-    err.__cause__ = KeyboardInterrupt()
-    return err
-
-
 class _BreaksAfterOneResult:
     """Local workers, and a driver that breaks after the first result with ``error``."""
 
@@ -249,7 +243,7 @@ def test_an_error_in_the_run_closes_the_workers(scans, tmp_path):
     for error, raised in [
         (RuntimeError("a bug in the driver"), RuntimeError),
         (KeyboardInterrupt(), UserInterruptError),
-        (_interrupted_import(), UserInterruptError),  # Ctrl-C while a module was imported
+        (during_ctrl_c(ImportError("initialization failed")), UserInterruptError),
     ]:
         executor = _BreaksAfterOneResult(error)
         with pytest.raises(raised) as caught:
