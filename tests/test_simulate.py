@@ -197,3 +197,140 @@ def test_scanner_inside_an_object_is_refused(street):
     centre = 0.5 * (street.boxes_min[0] + street.boxes_max[0])
     with pytest.raises(ValueError, match="inside"):
         sim.simulate_scan(street, sim.scanner_pose(*centre[:2], 0.0, height=centre[2]), **SMALL)
+
+
+# --- varied worlds: sloped and cambered ground, turned streets, crowns, people and traffic ---
+
+
+def _first_crossing(ground: sim.Ground, origin: np.ndarray, d: np.ndarray) -> float:
+    """Where a ray first crosses the ground, by fine steps and bisection (no algebra)."""
+    ts = np.linspace(0.0, 300.0, 30001)
+    p = origin + ts[:, None] * d
+    gap = ground.z(p[:, 0], p[:, 1]) - p[:, 2]
+    after = np.flatnonzero(gap >= 0.0)
+    if not len(after):
+        return np.inf
+    lo, hi = ts[after[0] - 1], ts[after[0]]
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        q = origin + mid * d
+        lo, hi = (mid, hi) if ground.z(q[0], q[1]) - q[2] < 0 else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+@pytest.mark.parametrize(
+    "ground",
+    [
+        sim.Ground(grade=0.08),
+        sim.Ground(grade=-0.03, cross_fall=0.02, curve=0.0005, crown=-0.006),
+        sim.Ground(curve=-0.001),
+        sim.Ground(grade=0.04, curve=0.001),
+    ],
+)
+def test_ray_ground_crossing_matches_a_marched_ray(ground):
+    rng = np.random.default_rng(1)
+    origin = np.array([3.0, -2.0, float(ground.z(3.0, -2.0)) + 1.6])
+    d = rng.normal(size=(40, 3))
+    d[:, 2] = -np.abs(d[:, 2]) * rng.uniform(0.02, 1.0, 40)  # many grazing rays
+    d[30:, 2] = rng.uniform(0.0, 0.03, 10)  # and some rising: a sag or a rising road meets them
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    t = ground.hit(origin, d)
+    for k in range(len(d)):
+        marched = _first_crossing(ground, origin, d[k])
+        if np.isfinite(marched):
+            assert t[k] == pytest.approx(marched, abs=1e-6)
+        else:
+            assert t[k] > 300.0  # beyond the marched stretch
+
+
+def test_a_turned_street_on_a_slope_is_scanned_on_its_surfaces():
+    ground = sim.Ground(grade=0.06, cross_fall=-0.02, crown=-0.005)
+    scene = sim.make_street(seed=3, origin=(40.0, -25.0), axis_deg=35.0, ground=ground)
+    a = np.radians(35.0)
+    xy = np.array([40.0, -25.0]) + 10.0 * np.array([np.cos(a), np.sin(a)])
+    T = sim.scanner_pose(*xy, 20.0, float(ground.z(*xy)) + 1.6)
+    world = apply(T, sim.simulate_scan(scene, T, **SMALL, range_noise=0.0))
+    assert not scene.contains(world, margin=1e-6).any()  # nothing inside a (turned) box
+    height = world[:, 2] - ground.z(world[:, 0], world[:, 1])
+    assert height.min() > -1e-6  # nothing below the ground
+    assert (np.abs(height) < 1e-6).mean() > 0.2  # and much of the scan on it
+    along = (world[:, :2] - [40.0, -25.0]) @ [np.cos(a), np.sin(a)]
+    across = (world[:, :2] - [40.0, -25.0]) @ [-np.sin(a), np.cos(a)]
+    facade = (np.abs(np.abs(across) - 9.0) < 0.5) & (height > 2.0)
+    assert facade.sum() > 200  # the facade lines run along the turned axis, 9 m from it
+    assert np.ptp(along[facade]) > 60.0
+
+
+def test_objects_that_reach_the_ground_reach_into_a_sloped_one():
+    ground = sim.Ground(grade=0.08, crown=-0.006)
+    scene = sim.make_street(seed=5, ground=ground)
+    touching = scene.boxes_min[:, 2] < scene.boxes_max[:, 2] - 0.5
+    for lo, hi in zip(scene.boxes_min[touching], scene.boxes_max[touching], strict=True):
+        xs, ys = np.meshgrid([lo[0], hi[0]], [lo[1], hi[1]])
+        if lo[2] < ground.z(xs, ys).max():  # an object standing on the ground
+            assert lo[2] <= ground.z(xs, ys).min() + 1e-9
+    poles = scene.cylinders
+    assert np.all(poles[:, 3] < ground.z(poles[:, 0], poles[:, 1]))
+
+
+def test_rays_into_a_crown_stop_at_the_depth_its_density_gives():
+    density = 1.5
+    crown = np.array([[10.0, 0.0, 1.6, 3.0, 3.0, 3.0, density]])
+    scene = sim.Scene(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 5)), crowns=crown)
+    T = sim.scanner_pose(0.0, 0.0, 0.0, height=1.6)
+    pts = sim.simulate_scan(
+        scene,
+        T,
+        n_azimuth=3600,
+        n_elevation=21,
+        elevation_range_deg=(-2.0, 2.0),
+        range_noise=0.0,
+        seed=3,
+    )
+    world = apply(T, pts)
+    ahead = (np.abs(world[:, 1]) < 0.3) & (world[:, 2] > 1.0)  # rays through the centre
+    depth = np.linalg.norm(world[ahead] - [0, 0, 1.6], axis=1) - 7.0  # past where they enter
+    assert len(depth) > 100
+    assert np.all((depth > -1e-9) & (depth < 6.0))
+    # an exponential depth of mean 1/density, cut at the 6 m chord: its mean is known
+    d = 6.0
+    expected = 1 / density - d * np.exp(-density * d) / (1 - np.exp(-density * d))
+    assert depth.mean() == pytest.approx(expected, rel=0.15)
+    again = sim.simulate_scan(
+        scene,
+        T,
+        n_azimuth=3600,
+        n_elevation=21,
+        elevation_range_deg=(-2.0, 2.0),
+        range_noise=0.0,
+        seed=4,
+    )
+    assert not np.array_equal(pts, again)  # foliage differs between scans
+
+
+def test_street_world_poses_stand_on_the_ground_and_people_move():
+    world = sim.StreetWorld(
+        seed=2,
+        n_scans=3,
+        grade=0.05,
+        camber=0.03,
+        tilt_deg=0.8,
+        people=12,
+        traffic=2,
+        rays=(360, 60),
+    )
+    scene, _, poses = sim.scan_street(world)
+    for T in poses:
+        above = T[2, 3] - scene.ground_z(T[0, 3], T[1, 3])
+        assert 1.4 < above < 1.85
+        tilt = np.degrees(np.arccos(T[2, 2]))
+        assert tilt < 0.8 * np.sqrt(2) + 1e-9
+    rng = np.random.default_rng(0)
+    a = sim.passers_by(world, np.zeros(2), 0.0, rng)
+    b = sim.passers_by(world, np.zeros(2), 0.0, rng)
+    assert len(a.cylinders) == len(b.cylinders) == 12
+    assert not np.allclose(a.cylinders, b.cylinders)
+    compensated = sim.scan_street(
+        sim.StreetWorld(seed=2, n_scans=2, compensated=True, tilt_deg=1.0, rays=(360, 60))
+    )[2]
+    assert all(np.degrees(np.arccos(T[2, 2])) < 0.0043 for T in compensated)

@@ -5,7 +5,19 @@ Frames: the **world frame** (right-handed, z up, ground z = 0, the street along 
 gives bit-identical output.
 """
 
+from ndt_cli.sim.ground import Ground
 from ndt_cli.sim.scanner import make_sequence, scanner_pose, simulate_scan
 from ndt_cli.sim.scene import Scene, make_street
+from ndt_cli.sim.worlds import StreetWorld, passers_by, scan_street
 
-__all__ = ["Scene", "make_sequence", "make_street", "scanner_pose", "simulate_scan"]
+__all__ = [
+    "Ground",
+    "Scene",
+    "StreetWorld",
+    "make_sequence",
+    "make_street",
+    "passers_by",
+    "scan_street",
+    "scanner_pose",
+    "simulate_scan",
+]

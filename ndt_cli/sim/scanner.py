@@ -85,23 +85,47 @@ def _chunks(counts: np.ndarray, limit: int) -> list[slice]:
     return [slice(int(a), int(b)) for a, b in itertools.pairwise(bounds)]
 
 
-def _cast(scene: Scene, origin: np.ndarray, dirs: np.ndarray, max_range: float) -> np.ndarray:
+def _cast(
+    scene: Scene,
+    origin: np.ndarray,
+    dirs: np.ndarray,
+    max_range: float,
+    foliage: np.random.Generator | None = None,
+) -> np.ndarray:
     """Distance (m) along unit world rays ``dirs`` from ``origin`` to the first surface hit;
-    ``max_range`` where nothing is hit closer."""
+    ``max_range`` where nothing is hit closer. ``foliage`` draws where rays stop in crowns."""
     t_best = np.full(len(dirs), float(max_range))
-    down = dirs[:, 2] < -1e-12
-    t_best[down] = np.minimum(t_best[down], -origin[2] / dirs[down, 2])  # ground plane z = 0
-    t_best[t_best < 0] = max_range  # origin below ground: no ground hit
+    if scene.ground.flat:
+        down = dirs[:, 2] < -1e-12
+        t_best[down] = np.minimum(t_best[down], -origin[2] / dirs[down, 2])  # the plane z = 0
+        t_best[t_best < 0] = max_range  # origin below ground: no ground hit
+    else:
+        if origin[2] <= scene.ground.z(origin[0], origin[1]):
+            raise ValueError("the scanner centre lies below the ground")
+        np.minimum(t_best, scene.ground.hit(origin, dirs), out=t_best)
+    rays = _rays(origin, dirs)
+    for yaw in np.unique(scene.boxes_yaw):
+        pick = scene.boxes_yaw == yaw
+        turned = rays if yaw == 0.0 else _rays(_turn(origin[None], -yaw)[0], _turn(dirs, -yaw))
+        _hit_boxes(scene.boxes_min[pick], scene.boxes_max[pick], turned, t_best, max_range)
+    _hit_cylinders(scene, rays, t_best, max_range)
+    if len(scene.crowns):
+        _hit_crowns(scene.crowns, origin, dirs, t_best, foliage or np.random.default_rng(0))
+    return t_best
 
+
+def _turn(v: np.ndarray, angle: float) -> np.ndarray:
+    """(N,3) vectors turned by ``angle`` radians about z."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.column_stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1], v[:, 2]])
+
+
+def _rays(origin: np.ndarray, dirs: np.ndarray) -> _Rays:
     az = np.arctan2(dirs[:, 1], dirs[:, 0])
     order = np.argsort(az, kind="stable")
-    sorted_az = az[order]
     with np.errstate(divide="ignore"):
         inv = 1.0 / np.where(dirs == 0.0, 1e-300, dirs)  # huge but finite-safe slab inverses
-    rays = _Rays(origin, dirs, inv, order, sorted_az)
-    _hit_boxes(scene, rays, t_best, max_range)
-    _hit_cylinders(scene, rays, t_best, max_range)
-    return t_best
+    return _Rays(origin, dirs, inv, order, az[order])
 
 
 @dataclass(frozen=True)
@@ -116,11 +140,13 @@ class _Rays:
     sorted_az: np.ndarray
 
 
-def _hit_boxes(scene: Scene, rays: _Rays, t_best: np.ndarray, max_range: float) -> None:
-    """Lower ``t_best`` (m along each ray) to the nearest box surface hit."""
+def _hit_boxes(
+    bmin: np.ndarray, bmax: np.ndarray, rays: _Rays, t_best: np.ndarray, max_range: float
+) -> None:
+    """Lower ``t_best`` (m along each ray) to the nearest hit of the axis-aligned boxes
+    ``bmin``-``bmax`` (in the rays' frame)."""
     origin, inv, order, sorted_az = rays.origin, rays.inv, rays.order, rays.sorted_az
     ox, oy = origin[0], origin[1]
-    bmin, bmax = scene.boxes_min, scene.boxes_max
     if not len(bmin):
         return
     near = np.clip(origin, bmin, bmax)
@@ -152,6 +178,35 @@ def _hit_boxes(scene: Scene, rays: _Rays, t_best: np.ndarray, max_range: float) 
         t_far = np.maximum(t1, t2).min(axis=1)
         hit = (t_near <= t_far) & (t_near > 0.0)
         np.minimum.at(t_best, ray[hit], t_near[hit])
+
+
+def _hit_crowns(
+    crowns: np.ndarray,
+    origin: np.ndarray,
+    dirs: np.ndarray,
+    t_best: np.ndarray,
+    rng: np.random.Generator,
+) -> None:
+    """Lower ``t_best`` where a ray is stopped inside a porous crown: at an exponentially
+    distributed depth (mean ``1 / density`` m) past where it enters, if that is before it
+    leaves. Crowns are few: one vectorised pass over the rays each."""
+    for x, y, z, rx, ry, rz, density in crowns:
+        scale = np.array([rx, ry, rz])
+        o = (origin - (x, y, z)) / scale
+        d = dirs / scale
+        a = np.einsum("ij,ij->i", d, d)
+        b = d @ o
+        c = float(o @ o) - 1.0
+        disc = b * b - a * c
+        cand = np.flatnonzero(disc > 0.0)
+        if not len(cand):
+            continue
+        root = np.sqrt(disc[cand])
+        t0 = np.maximum((-b[cand] - root) / a[cand], 0.0)
+        t1 = (-b[cand] + root) / a[cand]
+        t = t0 + rng.exponential(1.0 / density, len(cand))
+        hit = (t < t1) & (t1 > 0.0) & (t < t_best[cand])
+        t_best[cand[hit]] = t[hit]
 
 
 def _hit_cylinders(scene: Scene, rays: _Rays, t_best: np.ndarray, max_range: float) -> None:
@@ -214,7 +269,8 @@ def simulate_scan(
     plane, the boxes and the cylinders (nearest hit, so occlusion is exact); rays with no hit
     closer than ``max_range`` (m) return nothing. Gaussian noise with standard deviation
     ``range_noise`` (m) is added along each ray. Points are ordered azimuth-major, then by
-    elevation; the noise is drawn from ``np.random.default_rng(seed)``.
+    elevation; the noise is drawn from ``np.random.default_rng(seed)``, where rays stop in tree
+    crowns from ``np.random.default_rng([seed, 1])``.
     """
     T = np.asarray(T_world_scan, dtype=np.float64)
     if T.shape != (4, 4):
@@ -228,7 +284,8 @@ def simulate_scan(
     se = np.broadcast_to(se, (n_azimuth, n_elevation))
     dirs_scan = np.stack([(ca * ce).ravel(), (sa * ce).ravel(), se.ravel()], axis=1)
     dirs_world = dirs_scan @ T[:3, :3].T
-    t = _cast(scene, T[:3, 3].copy(), dirs_world, max_range)
+    foliage = np.random.default_rng([seed, 1]) if len(scene.crowns) else None
+    t = _cast(scene, T[:3, 3].copy(), dirs_world, max_range, foliage)
     hit = t < max_range
     rng = np.random.default_rng(seed)
     r = t[hit] + rng.normal(0.0, range_noise, int(hit.sum())) if range_noise > 0 else t[hit]

@@ -1,7 +1,10 @@
 """Street scenes for the simulator: buildings with facade relief, cars, poles and trees.
 
-Units are metres. World frame: right-handed, z up, the ground is the plane z = 0, the street runs
-along x and is centred on y = 0. Deterministic in the seed.
+Units are metres. World frame: right-handed, z up. By default the ground is the plane z = 0 and
+the street runs along x, centred on y = 0; a street may also be placed anywhere at any heading
+(``origin``, ``axis_deg``) on a sloped, cambered ground (:class:`~ndt_cli.sim.ground.Ground`),
+with tree crowns, and scenes can be merged (a junction, a block walked around). Deterministic in
+the seed.
 """
 
 from __future__ import annotations
@@ -10,6 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ndt_cli.sim.ground import Ground
+
 # Street cross-section (metres, measured from the street centre line y = 0).
 _SIDEWALK = 3.0  # sidewalk width between kerb and facade line
 _CORRIDOR_EXTENSION = 150.0  # corridor facades run this far beyond each street end
@@ -17,33 +22,51 @@ _CORRIDOR_EXTENSION = 150.0  # corridor facades run this far beyond each street 
 
 @dataclass(frozen=True, eq=False)
 class Scene:
-    """Static street scene in the world frame (metres; z up; ground is the plane z = 0).
+    """Static street scene in the world frame (metres; z up).
 
     Attributes:
-        boxes_min: (B, 3) float64 lower corners (x, y, z) of axis-aligned boxes (buildings,
-            facade relief, cars, signs).
+        boxes_min: (B, 3) float64 lower corners (x, y, z) of boxes (buildings, facade relief,
+            cars, signs), in the box's own axes: box k holds the points p with
+            ``boxes_min[k] <= Rz(-boxes_yaw[k]) p <= boxes_max[k]``.
         boxes_max: (B, 3) float64 upper corners of the same boxes.
         cylinders: (C, 5) float64 vertical cylinders ``x, y, radius, z_min, z_max``
             (poles, tree trunks), closed by flat caps.
-        street_axis_deg: direction of the street axis in the world frame, degrees from +x.
+        street_axis_deg: direction of the (first) street axis in the world frame, degrees
+            from +x.
+        boxes_yaw: (B,) float64 heading of each box's axes (radians about world z; default 0:
+            axis-aligned).
+        crowns: (K, 7) float64 porous vertical ellipsoids ``x, y, z, rx, ry, rz, density``
+            (tree crowns): a ray through one is stopped at an exponentially distributed depth
+            of mean ``1 / density`` m, drawn per scan (foliage differs between scans).
+        ground: the ground surface (default: the plane z = 0).
     """
 
     boxes_min: np.ndarray
     boxes_max: np.ndarray
     cylinders: np.ndarray
     street_axis_deg: float = 0.0
+    boxes_yaw: np.ndarray | None = None
+    crowns: np.ndarray | None = None
+    ground: Ground = field(default_factory=Ground)
 
     def __post_init__(self) -> None:
         bmin = np.array(self.boxes_min, dtype=np.float64).reshape(-1, 3)
         bmax = np.array(self.boxes_max, dtype=np.float64).reshape(-1, 3)
         cyl = np.array(self.cylinders, dtype=np.float64).reshape(-1, 5)
-        if bmin.shape != bmax.shape:
-            raise ValueError("boxes_min and boxes_max must have the same shape (B, 3)")
+        yaw = np.zeros(len(bmin)) if self.boxes_yaw is None else np.array(self.boxes_yaw, float)
+        crowns = np.zeros((0, 7)) if self.crowns is None else np.array(self.crowns, float)
+        crowns = crowns.reshape(-1, 7)
+        if bmin.shape != bmax.shape or yaw.shape != (len(bmin),):
+            raise ValueError("boxes_min, boxes_max (B, 3) and boxes_yaw (B,) must agree")
         if np.any(bmax < bmin):
             raise ValueError("every box needs boxes_max >= boxes_min")
         if np.any(cyl[:, 2] <= 0) or np.any(cyl[:, 4] < cyl[:, 3]):
             raise ValueError("cylinders need radius > 0 and z_max >= z_min")
-        for name, arr in (("boxes_min", bmin), ("boxes_max", bmax), ("cylinders", cyl)):
+        if np.any(crowns[:, 3:] <= 0):
+            raise ValueError("crowns need positive radii and density")
+        arrays = {"boxes_min": bmin, "boxes_max": bmax, "cylinders": cyl}
+        arrays.update(boxes_yaw=yaw, crowns=crowns)
+        for name, arr in arrays.items():
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
         object.__setattr__(self, "street_axis_deg", float(self.street_axis_deg))
@@ -53,36 +76,59 @@ class Scene:
             return NotImplemented
         return (
             self.street_axis_deg == other.street_axis_deg
-            and np.array_equal(self.boxes_min, other.boxes_min)
-            and np.array_equal(self.boxes_max, other.boxes_max)
-            and np.array_equal(self.cylinders, other.cylinders)
+            and self.ground == other.ground
+            and all(
+                np.array_equal(getattr(self, n), getattr(other, n))
+                for n in ("boxes_min", "boxes_max", "cylinders", "boxes_yaw", "crowns")
+            )
         )
 
     __hash__ = None  # type: ignore[assignment]  # mutable-looking arrays: not hashable
 
     def ground_z(self, x: np.ndarray | float, y: np.ndarray | float) -> np.ndarray:
-        """Ground height (m) at world (x, y); the ground is the flat plane z = 0."""
-        return np.zeros(np.broadcast(np.asarray(x), np.asarray(y)).shape)
+        """Ground height (m) at world (x, y)."""
+        return self.ground.z(x, y)
+
+    def merged(self, *others: Scene) -> Scene:
+        """This scene and ``others`` in one (they must share the ground): streets of a
+        junction, or a street and the people and cars passing during one scan."""
+        scenes = (self, *others)
+        if any(o.ground != self.ground for o in others):
+            raise ValueError("merged scenes must share one ground")
+        return Scene(
+            np.vstack([s.boxes_min for s in scenes]),
+            np.vstack([s.boxes_max for s in scenes]),
+            np.vstack([s.cylinders for s in scenes]),
+            self.street_axis_deg,
+            np.concatenate([s.boxes_yaw for s in scenes]),
+            np.vstack([s.crowns for s in scenes]),
+            self.ground,
+        )
 
     def contains(self, points: np.ndarray, margin: float = 0.0) -> np.ndarray:
-        """Boolean mask of world points strictly inside a box or cylinder shrunk by ``margin`` m."""
+        """Boolean mask of world points strictly inside a box or cylinder shrunk by ``margin`` m
+        (crowns are porous and not counted)."""
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         inside = np.zeros(len(pts), dtype=bool)
         step = max(1, 2_000_000 // max(1, len(self.boxes_min) + len(self.cylinders)))
-        for s in range(0, len(pts), step):
-            p = pts[s : s + step]
+        c, s = np.cos(self.boxes_yaw)[None], np.sin(self.boxes_yaw)[None]
+        for k in range(0, len(pts), step):
+            p = pts[k : k + step]
             lo = self.boxes_min[None] + margin
             hi = self.boxes_max[None] - margin
-            in_box = np.all((p[:, None] > lo) & (p[:, None] < hi), axis=2).any(axis=1)
-            c = self.cylinders
-            d2 = (p[:, None, 0] - c[None, :, 0]) ** 2 + (p[:, None, 1] - c[None, :, 1]) ** 2
-            r = np.maximum(c[None, :, 2] - margin, 0.0)
+            bx = c * p[:, None, 0] + s * p[:, None, 1]  # the points in each box's axes
+            by = -s * p[:, None, 0] + c * p[:, None, 1]
+            q = np.stack([bx, by, np.broadcast_to(p[:, None, 2], bx.shape)], axis=2)
+            in_box = np.all((q > lo) & (q < hi), axis=2).any(axis=1)
+            cy = self.cylinders
+            d2 = (p[:, None, 0] - cy[None, :, 0]) ** 2 + (p[:, None, 1] - cy[None, :, 1]) ** 2
+            r = np.maximum(cy[None, :, 2] - margin, 0.0)
             in_cyl = (
                 (d2 < r**2)
-                & (p[:, None, 2] > c[None, :, 3] + margin)
-                & (p[:, None, 2] < c[None, :, 4] - margin)
+                & (p[:, None, 2] > cy[None, :, 3] + margin)
+                & (p[:, None, 2] < cy[None, :, 4] - margin)
             ).any(axis=1)
-            inside[s : s + step] = in_box | in_cyl
+            inside[k : k + step] = in_box | in_cyl
         return inside
 
 
@@ -296,16 +342,32 @@ def _furniture(
 
 
 def make_street(
-    seed: int = 0, length: float = 260.0, width: float = 18.0, *, corridor: bool = False
+    seed: int = 0,
+    length: float = 260.0,
+    width: float = 18.0,
+    *,
+    corridor: bool = False,
+    origin: tuple[float, float] = (0.0, 0.0),
+    axis_deg: float = 0.0,
+    ground: Ground | None = None,
+    trees: bool = False,
+    clear: tuple[tuple[float, float, float, float], ...] = (),
 ) -> Scene:
-    """Build a straight street along the world x axis, centred on the origin.
+    """Build a straight street, by default along the world x axis, centred on the origin.
 
-    ``length`` (m) is the street length (x in [-length/2, length/2]) and ``width`` (m) the
-    facade-to-facade distance (facade lines at y = +-width/2, behind 3 m sidewalks). The street
-    has blocks 8-30 m wide and 6-25 m high with 10-20 m depth, gaps / side streets, facade relief
-    of 0.1-0.6 m, parked cars at both kerbs, lamp posts, sign posts and tree trunks.
-    ``corridor=True`` gives the degenerate case: one gap-free facade per side that is uniform
-    along x and extends 150 m beyond both street ends, no cars, no poles. Deterministic in ``seed``.
+    ``length`` (m) is the street length (x in [-length/2, length/2] along the street) and
+    ``width`` (m) the facade-to-facade distance (facade lines at +-width/2, behind 3 m
+    sidewalks). The street has blocks 8-30 m wide and 6-25 m high with 10-20 m depth, gaps /
+    side streets, facade relief of 0.1-0.6 m, parked cars at both kerbs, lamp posts, sign posts
+    and tree trunks. ``corridor=True`` gives the degenerate case: one gap-free facade per side
+    that is uniform along x and extends 150 m beyond both street ends, no cars, no poles.
+
+    Placement: the street's centre is at world ``origin`` (x, y) and its axis at ``axis_deg``
+    from +x; it stands on ``ground`` (every object keeps its height above the ground in front
+    of it, and objects that reach the ground reach down into it). ``trees``: a porous crown on
+    every trunk. ``clear``: rectangles ``(x0, x1, y0, y1)`` in the street's own frame (x along
+    it, y across, m) left empty of objects, e.g. where a side street joins. Deterministic in
+    ``seed``; with the defaults the scene is the one earlier versions built.
     """
     if length <= 0 or width <= 2 * _SIDEWALK + 2:
         raise ValueError("need length > 0 and width > 8 m")
@@ -319,14 +381,86 @@ def make_street(
             _corridor_side(
                 boxes, rng, side, half_w, x_lo - _CORRIDOR_EXTENSION, x_hi + _CORRIDOR_EXTENSION
             )
-        bmin, bmax = boxes.arrays()
-        return Scene(bmin, bmax, np.zeros((0, 5)), 0.0)
-
-    for sign in (1, -1):
-        side = _Side(sign, half_w, kerb, x_lo, x_hi)
-        _blocks(boxes, rng, side)
-        _parked_cars(boxes, rng, side)
-        _furniture(boxes, cyl, rng, side)
-
+    else:
+        for sign in (1, -1):
+            side = _Side(sign, half_w, kerb, x_lo, x_hi)
+            _blocks(boxes, rng, side)
+            _parked_cars(boxes, rng, side)
+            _furniture(boxes, cyl, rng, side)
     bmin, bmax = boxes.arrays()
-    return Scene(bmin, bmax, np.array(cyl, dtype=np.float64).reshape(-1, 5), 0.0)
+    cylinders = np.array(cyl, dtype=np.float64).reshape(-1, 5)
+    crowns = _crowns(cylinders, kerb, seed) if trees else np.zeros((0, 7))
+    local = _cleared(Scene(bmin, bmax, cylinders, 0.0, crowns=crowns), clear)
+    return placed(local, np.asarray(origin, dtype=float), axis_deg, ground or Ground())
+
+
+def _crowns(cylinders: np.ndarray, kerb: float, seed: int) -> np.ndarray:
+    """A porous crown above every tree trunk (the trunks stand 1.2 m behind the kerb), drawn
+    from a generator of their own so that the rest of the street does not change."""
+    rng = np.random.default_rng([seed, 2])
+    trunks = cylinders[np.isclose(np.abs(cylinders[:, 1]), kerb + 1.2)]
+    n = len(trunks)
+    r = rng.uniform(1.5, 3.0, n)
+    rz = rng.uniform(1.5, 2.8, n)
+    z = trunks[:, 4] + 0.7 * rz
+    density = rng.uniform(0.6, 2.0, n)
+    return np.column_stack([trunks[:, 0], trunks[:, 1], z, r, r, rz, density])
+
+
+def _cleared(scene: Scene, rects: tuple[tuple[float, float, float, float], ...]) -> Scene:
+    """The scene without the objects whose footprint meets one of the rectangles
+    ``(x0, x1, y0, y1)`` (axis-aligned scene, m)."""
+    if not rects:
+        return scene
+    keep_b = np.ones(len(scene.boxes_min), dtype=bool)
+    keep_c = np.ones(len(scene.cylinders), dtype=bool)
+    keep_k = np.ones(len(scene.crowns), dtype=bool)
+    for x0, x1, y0, y1 in rects:
+        lo, hi = scene.boxes_min, scene.boxes_max
+        keep_b &= ~((lo[:, 0] < x1) & (hi[:, 0] > x0) & (lo[:, 1] < y1) & (hi[:, 1] > y0))
+        for keep, arr, r in ((keep_c, scene.cylinders, 2), (keep_k, scene.crowns, 3)):
+            x, y, rad = arr[:, 0], arr[:, 1], arr[:, r]
+            keep &= ~((x + rad > x0) & (x - rad < x1) & (y + rad > y0) & (y - rad < y1))
+    return Scene(
+        scene.boxes_min[keep_b],
+        scene.boxes_max[keep_b],
+        scene.cylinders[keep_c],
+        scene.street_axis_deg,
+        crowns=scene.crowns[keep_k],
+    )
+
+
+def placed(local: Scene, origin: np.ndarray, axis_deg: float, ground: Ground) -> Scene:
+    """An axis-aligned street on flat ground, turned to ``axis_deg``, moved to ``origin`` and
+    set on ``ground``. The defaults return it unchanged."""
+    if axis_deg == 0.0 and not origin.any() and ground.flat:
+        return local
+    a = np.radians(axis_deg)
+    R = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    shift = R.T @ origin  # the origin in the turned axes: boxes are stored in those
+    lo, hi = local.boxes_min.copy(), local.boxes_max.copy()
+    lo[:, :2] += shift
+    hi[:, :2] += shift
+    y0, y1 = local.boxes_min[:, 1], local.boxes_max[:, 1]
+    near_y = np.where(y0 > 0, y0, np.where(y1 < 0, y1, 0.0)) + shift[1]  # the side facing the axis
+    front = np.column_stack([0.5 * (lo[:, 0] + hi[:, 0]), near_y])
+    base = ground.z(*(front @ R.T).T)  # the ground in front of each box
+    corners = [
+        (lo[:, 0], lo[:, 1]),
+        (lo[:, 0], hi[:, 1]),
+        (hi[:, 0], lo[:, 1]),
+        (hi[:, 0], hi[:, 1]),
+    ]
+    low = np.min([ground.z(*(np.column_stack(c) @ R.T).T) for c in corners], axis=0)
+    touching = local.boxes_min[:, 2] <= 1e-9
+    lo[:, 2] = np.where(touching, low - 0.3, lo[:, 2] + base)
+    hi[:, 2] += base
+    cyl, crowns = local.cylinders.copy(), local.crowns.copy()
+    cyl[:, :2] = cyl[:, :2] @ R.T + origin
+    g = ground.z(cyl[:, 0], cyl[:, 1])
+    cyl[:, 3] = np.where(cyl[:, 3] <= 1e-9, g - 0.3, cyl[:, 3] + g)
+    cyl[:, 4] += g
+    crowns[:, :2] = crowns[:, :2] @ R.T + origin
+    crowns[:, 2] += ground.z(crowns[:, 0], crowns[:, 1])
+    yaw = np.full(len(lo), a)
+    return Scene(lo, hi, cyl, axis_deg, yaw, crowns, ground)
