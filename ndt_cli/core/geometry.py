@@ -1,5 +1,5 @@
-"""Small geometric building blocks on 3D points (metres, any frame): voxel thinning, normals and
-the dominant "up" direction of a scan."""
+"""Small geometric building blocks on 3D points (metres, any frame): voxel thinning and the
+normals of local planes."""
 
 from __future__ import annotations
 
@@ -108,38 +108,3 @@ def normals(
     plane (:mod:`ndt_cli.core.planes`)."""
     _, idx = surfaces.neighbours.knn(grid, points, k)
     return surfaces.planes(grid.data, idx)
-
-
-def dominant_up(
-    points: np.ndarray,
-    voxel: float = 0.25,
-    max_tilt_deg: float = 25.0,
-    sample: int = 20_000,
-    surfaces: Surfaces = SURFACES,
-) -> np.ndarray:
-    """Unit normal (frame of ``points``) shared by most of the roughly horizontal surfaces.
-
-    Ground, floors, ceilings and flat roofs are level in a built scene, so this is the up
-    direction of a tilted scanner. Normals from local PCA of voxel-thinned points; those within
-    ``max_tilt_deg`` of +z are averaged inside a cone that narrows from 10 to 2.5 degrees around
-    the current estimate. Returns +z when there are too few planar, roughly horizontal points.
-    """
-    up = np.array([0.0, 0.0, 1.0])
-    thin = voxel_thin(points, voxel)
-    if len(thin) < 50:
-        return up
-    k = min(10, len(thin))
-    n, planarity = normals(
-        thin[:: max(1, len(thin) // sample)], surfaces.grid(thin, voxel), k, surfaces
-    )
-    n = n * np.where(n[:, 2] < 0, -1.0, 1.0)[:, None]
-    n = n[(planarity > 0.7) & (n[:, 2] > np.cos(np.radians(max_tilt_deg)))]
-    if len(n) < 20:
-        return up
-    u = np.median(n, axis=0)
-    for cone in (10.0, 5.0, 2.5):
-        near = n[n @ (u / np.linalg.norm(u)) > np.cos(np.radians(cone))]
-        if len(near) < 10:
-            break
-        u = near.mean(axis=0)
-    return u / np.linalg.norm(u)

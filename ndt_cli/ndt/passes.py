@@ -1,13 +1,15 @@
 """One pass over the points of a chunk (Numba), with plain-numpy twins that the tests compare.
 
 A scan of millions of points is touched twice while it is prepared: once for its bounding box
-(numpy), and once to cut the slices and thin the points for ICP, fused into a single loop;
-everything else works on the much smaller results. Coordinates are metres.
+(numpy), and once to cut the slices (each point's height above the ground model under it) and
+thin the points for ICP, fused into a single loop; everything else works on the much smaller
+results. Coordinates are metres.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numba
 import numpy as np
@@ -16,6 +18,7 @@ from ndt_cli.core.arrays import column_bounds
 from ndt_cli.core.geometry import VOXEL_OFFSET as _OFFSET
 from ndt_cli.core.geometry import voxel_keys
 from ndt_cli.ndt.slicing import cut_slices
+from ndt_cli.ndt.terrain import Terrain
 
 MAX_SLICES = 63  # slice membership is a bit mask in an int64
 
@@ -34,26 +37,38 @@ _GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # Fibonacci hashing: 2**64 / golden rat
 
 @numba.njit(cache=True, nogil=True)
 def _slice_pass(
-    points, reduction, level, heights, half, voxel, mask, xy, keys, sums, counts
+    points, reduction, level, heights, half, voxel, ground, frame, mask, xy, keys, sums, counts
 ):  # pragma: no cover - compiled
+    # frame: ground grid origin x, y, 1 / cell, and the largest squared distance kept (m^2)
     m = -1
     recent_key = np.zeros(1 << RECENT_BITS, np.int64)  # a small direct-mapped table of the
     recent_row = np.full(1 << RECENT_BITS, -1, np.int64)  # voxels seen last and their rows
     shift = np.uint64(64 - RECENT_BITS)
     inside = True
+    far = 0
+    nx, ny = ground.shape
     for i in range(points.shape[0]):
         x = points[i, 0] - reduction[0]
         y = points[i, 1] - reduction[1]
         z = points[i, 2] - reduction[2]
+        mask[i] = 0
+        if x * x + y * y + z * z > frame[3]:
+            far += 1
+            continue
+        lx = level[0, 0] * x + level[0, 1] * y + level[0, 2] * z
+        ly = level[1, 0] * x + level[1, 1] * y + level[1, 2] * z
         lz = level[2, 0] * x + level[2, 1] * y + level[2, 2] * z
+        gi = min(max(np.int64(np.floor((lx - frame[0]) * frame[2])), 0), nx - 1)
+        gj = min(max(np.int64(np.floor((ly - frame[1]) * frame[2])), 0), ny - 1)
+        hz = lz - ground[gi, gj]
         bits = np.int64(0)
         for k in range(heights.shape[0]):
-            if abs(lz - heights[k]) <= half:
+            if abs(hz - heights[k]) <= half:
                 bits |= np.int64(1) << k
         mask[i] = bits
         if bits != 0:
-            xy[i, 0] = level[0, 0] * x + level[0, 1] * y + level[0, 2] * z
-            xy[i, 1] = level[1, 0] * x + level[1, 1] * y + level[1, 2] * z
+            xy[i, 0] = lx
+            xy[i, 1] = ly
         if voxel > 0.0:
             ix = np.int64(np.floor(x / voxel)) + _OFFSET
             iy = np.int64(np.floor(y / voxel)) + _OFFSET
@@ -77,7 +92,25 @@ def _slice_pass(
             sums[row, 1] += y
             sums[row, 2] += z
             counts[row] += 1.0
-    return m + 1, inside
+    return m + 1, inside, far
+
+
+@dataclass(frozen=True)
+class Cut:
+    """What a pass over one chunk gives: the slices ((n_k,2) each, reduced levelled frame),
+    the points grouped by ICP voxel (None without ICP points) and the number of points left
+    out for lying farther than ``max_range`` from the reduction point."""
+
+    slices: list[np.ndarray]
+    grouped: Grouped | None
+    far: int = 0
+
+
+def _frame(terrain: Terrain | None, max_range: float) -> tuple[np.ndarray, np.ndarray]:
+    """The ground grid and the kernel's frame numbers (grid origin, 1 / cell, max range^2)."""
+    terrain = terrain or Terrain.flat()
+    frame = np.array([*terrain.origin, 1.0 / terrain.cell, max_range * max_range])
+    return np.ascontiguousarray(terrain.heights, np.float64), frame
 
 
 def slice_pass(
@@ -87,15 +120,20 @@ def slice_pass(
     heights: Sequence[float],
     thickness: float,
     voxel: float,
-) -> tuple[list[np.ndarray], Grouped | None]:
+    terrain: Terrain | None = None,
+    max_range: float = np.inf,
+) -> Cut:
     """Cut the slices of one chunk and group its points by ICP voxel, in one pass.
 
-    Returns the (n_k,2) slice points in the reduced, levelled frame ``L (p - reduction)`` (as
-    :func:`~ndt_cli.ndt.slicing.cut_slices` at ground 0), and, when ``voxel`` > 0, the points
-    ``p - reduction`` (unlevelled) grouped by ``voxel`` cube: keys, coordinate sums and counts,
-    each added in point order, one row per stretch of points in which the cube stayed among
-    those seen recently (a key may repeat; merge with
-    :meth:`~ndt_cli.core.geometry.VoxelThinner.add_grouped`).
+    A point's height is taken above ``terrain`` (the ground under it; default: the plane
+    z = 0) in the reduced, levelled frame ``L (p - reduction)``; slice k holds the points within
+    ``thickness / 2`` of ``heights[k]``, as (n_k,2) points of that frame (as
+    :func:`~ndt_cli.ndt.slicing.cut_slices` of the heights). When ``voxel`` > 0, the points
+    ``p - reduction`` (unlevelled) are grouped by ``voxel`` cube: keys, coordinate sums and
+    counts, each added in point order, one row per stretch of points in which the cube stayed
+    among those seen recently (a key may repeat; merge with
+    :meth:`~ndt_cli.core.geometry.VoxelThinner.add_grouped`). Points farther than
+    ``max_range`` m from the reduction point are left out of both.
     """
     if len(heights) > MAX_SLICES:
         raise ValueError(f"at most {MAX_SLICES} slices")
@@ -105,13 +143,16 @@ def slice_pass(
     xy = np.empty((n, 2))
     m_max = n if voxel > 0 else 0
     keys, sums, counts = np.empty(m_max, np.int64), np.empty((m_max, 3)), np.empty(m_max)
-    m, inside = _slice_pass(
+    ground, frame = _frame(terrain, max_range)
+    m, inside, far = _slice_pass(
         pts,
         np.asarray(reduction, np.float64),
         np.ascontiguousarray(level, np.float64),
         np.asarray(heights, np.float64),
         0.5 * thickness,
         float(voxel),
+        ground,
+        frame,
         mask,
         xy,
         keys,
@@ -124,7 +165,7 @@ def slice_pass(
     sub_mask, sub_xy = mask[hit], xy[hit]
     slices = [np.ascontiguousarray(sub_xy[(sub_mask >> k) & 1 == 1]) for k in range(len(heights))]
     grouped = (keys[:m], sums[:m], counts[:m]) if voxel > 0 else None
-    return slices, grouped
+    return Cut(slices, grouped, int(far))
 
 
 def slice_pass_numpy(
@@ -134,10 +175,18 @@ def slice_pass_numpy(
     heights: Sequence[float],
     thickness: float,
     voxel: float,
-) -> tuple[list[np.ndarray], Grouped | None]:
+    terrain: Terrain | None = None,
+    max_range: float = np.inf,
+) -> Cut:
     """Plain-numpy twin of :func:`slice_pass` (one row per point in the grouping)."""
     rel = points - reduction
-    slices = cut_slices(rel @ np.asarray(level).T, 0.0, heights, thickness)
+    near = np.einsum("ij,ij->i", rel, rel) <= max_range * max_range
+    rel = rel[near]
+    lev = rel @ np.asarray(level).T
+    ground = (terrain or Terrain.flat()).at(lev[:, :2])
+    lev[:, 2] -= ground
+    slices = cut_slices(lev, 0.0, heights, thickness)
+    far = int((~near).sum())
     if voxel <= 0:
-        return slices, None
-    return slices, (voxel_keys(rel, voxel), rel, np.ones(len(rel)))
+        return Cut(slices, None, far)
+    return Cut(slices, (voxel_keys(rel, voxel), rel, np.ones(len(rel))), far)

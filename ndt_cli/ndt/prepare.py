@@ -1,9 +1,12 @@
-"""From a point cloud to what the registration needs: reduction point, levelling, slices.
+"""From a point cloud to what the registration needs: reduction point, vertical, ground, slices.
 
-A scan's reduced frame is its own frame shifted by the reduction point ``r``: the centre of its
-bounding box in x, y (rounded to whole metres) and its ground level in z. All float maths happens
-there, so georeferenced coordinates (e.g. 5e6 m UTM northings) lose no precision, and slice
-heights are simply z values. Levelling turns the reduced frame so that the ground is horizontal.
+A scan's reduced frame is its own frame shifted by the reduction point ``r``: the median of its
+points in x, y (rounded to whole metres; a few stray points far away do not move it) and the
+ground under that point in z. All float maths happens there, so georeferenced coordinates (e.g.
+5e6 m UTM northings) lose no precision. Levelling turns the reduced frame so that its z axis is
+the vertical (:mod:`ndt_cli.ndt.vertical`), and each point's height is taken above the ground
+model under it (:mod:`ndt_cli.ndt.terrain`), so slices cut the same things in every scan of a
+sloping street.
 """
 
 from __future__ import annotations
@@ -19,17 +22,13 @@ import numpy as np
 
 from ndt_cli.config.rules import axes_matrix
 from ndt_cli.config.schema import Config, GroundConfig, InputConfig, SlicesConfig
-from ndt_cli.core.geometry import SURFACES, Surfaces, VoxelThinner, dominant_up
-from ndt_cli.core.transforms import (
-    levelling_rotation,
-    rotation4,
-    rotation_angle_deg,
-    translation,
-)
+from ndt_cli.core.geometry import SURFACES, Surfaces, VoxelThinner
+from ndt_cli.core.transforms import levelling_rotation, rotation4, translation
 from ndt_cli.errors import InputError
 from ndt_cli.ndt.backend import NUMBA, Kernels
-from ndt_cli.ndt.passes import bounds
-from ndt_cli.ndt.slicing import GROUND_SAMPLE, estimate_ground, fit_ground_plane
+from ndt_cli.ndt.slicing import GROUND_SAMPLE
+from ndt_cli.ndt.terrain import REACH, Terrain, terrain_of
+from ndt_cli.ndt.vertical import Patches, Vertical, vertical_of
 from ndt_cli.ndt.visibility import Sight
 
 log = logging.getLogger(__name__)
@@ -40,12 +39,14 @@ class PreparedScan:
     """A scan cut into slices. ``slices[k]`` is (n_k, 2) float64, metres, reduced frame."""
 
     path: Path | None
-    reduction: np.ndarray  # (3,) float64: a point of the ground plane below the bounding-box centre
+    reduction: np.ndarray  # (3,) float64: the ground under the scan's centre, scan frame, m
     ground_z: float  # ground level, scan frame (= reduction[2])
     slices: tuple[np.ndarray, ...]
     n_points: int
     level: np.ndarray = field(default_factory=lambda: np.eye(3))  # scan axes -> levelled axes
     points3d: np.ndarray | None = None  # thinned 3D points minus the reduction (for ICP), m
+    terrain: Terrain = field(default_factory=Terrain.flat)  # ground heights, reduced level frame
+    vertical: Vertical | None = None  # None: ground.z given, no levelling
 
     def to_local(self) -> np.ndarray:
         """4x4 from the scan frame to the reduced, levelled frame: q = L (p - reduction)."""
@@ -57,8 +58,8 @@ class PreparedScan:
 
     @property
     def tilt_deg(self) -> float:
-        """Angle (degrees) between the scan's z axis and the ground normal."""
-        return rotation_angle_deg(self.level)
+        """Angle (degrees) between the scan's z axis and the vertical it was levelled to."""
+        return 0.0 if self.vertical is None else self.vertical.tilt_deg
 
     @cached_property
     def sight(self) -> Sight | None:
@@ -177,80 +178,105 @@ class ScanChunks:
 
 @dataclass(frozen=True)
 class _FirstPass:
-    lo: np.ndarray  # bounding box, scanner frame, m
-    hi: np.ndarray
-    sample: np.ndarray  # regular-stride sample of at most GROUND_SAMPLE points
+    sample: np.ndarray  # regular-stride sample of at most GROUND_SAMPLE points, scanner frame
     n_points: int
 
 
 def _first_pass(scan: ScanChunks, inp: InputConfig) -> _FirstPass:
-    """Bounding box, a regular-stride sample for the ground and the levelling, and the count."""
+    """A regular-stride sample for the vertical and the ground, and the count."""
     stride = scan.n_points // GROUND_SAMPLE + 1
-    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     parts, seen = [], 0
     for c in scan.chunks():
         if len(c) == 0:
             continue
-        c_lo, c_hi = bounds(c)
-        lo, hi = np.minimum(lo, c_lo), np.maximum(hi, c_hi)
         parts.append(c[(-seen) % stride :: stride])
         seen += len(c)
     if seen == 0:
         raise _no_points_in_range(inp, scan.path)
-    return _FirstPass(lo, hi, np.concatenate(parts), seen)
+    return _FirstPass(np.concatenate(parts), seen)
 
 
-def reduction_and_level(
-    lo: np.ndarray,
-    hi: np.ndarray,
-    sample: np.ndarray,
-    ground: GroundConfig,
-    surfaces: Surfaces = SURFACES,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Reduction point (scanner frame, m) and levelling rotation of a scan from its bounding
-    box and a sample of its points: coarse levelling from the dominant up direction (tilts of
-    many degrees), then the ground level and the plane of the ground itself."""
-    centre = np.array([*np.round(0.5 * (lo[:2] + hi[:2])), np.round(lo[2])])
-    if ground.z is not None:
-        return np.array([centre[0], centre[1], float(ground.z)]), np.eye(3)
+@dataclass(frozen=True)
+class ScanFrame:
+    """Where a scan's reduced, levelled frame lies in the scan's own frame: the reduction point
+    (m), the levelling rotation (scan axes to levelled axes), the ground under it, the vertical
+    found (None with ``ground.z``) and the distance (m) beyond which points are stray."""
+
+    reduction: np.ndarray
+    level: np.ndarray
+    terrain: Terrain
+    vertical: Vertical | None
+    keep: float
+
+
+STRAY = 10.0  # points farther than this many times the sample's 99th-percentile distance
+MIN_KEEP = 1000.0  # (and than this many metres) from the centre are stray (a glitch, a "no
+# return" record at an absurd range) and left out: one such point must not move the frame
+
+
+def _keep(rel: np.ndarray) -> float:
+    """The distance (m) from the centre within which points count (see :data:`STRAY`)."""
+    r = np.sqrt(np.einsum("ij,ij->i", rel, rel))
+    return max(MIN_KEEP, STRAY * float(np.percentile(r, 99))) if len(r) else MIN_KEEP
+
+
+def scan_frame(
+    sample: np.ndarray, ground: GroundConfig, surfaces: Surfaces = SURFACES
+) -> ScanFrame:
+    """The frame of a scan from a regular sample of its points (scan frame, m): the centre,
+    the vertical from its local planes (``ground.vertical``; the scanner's z with
+    ``ground.level`` false), the ground model under it, and the reduction point on it."""
+    centre = np.round(np.median(sample, axis=0))
     rel = sample - centre
-    level = np.eye(3)
-    if ground.level:
-        u = dominant_up(rel, surfaces=surfaces)
-        level = levelling_rotation(-u[0] / u[2], -u[1] / u[2])
-        rel = rel @ level.T
-    offset = np.array([0.0, 0.0, estimate_ground(rel[:, 2], ground.bin_size)])
-    fine = np.eye(3)
-    if ground.level:
-        a, b, c = fit_ground_plane(rel - offset)
-        offset[2] += c  # the reduction point lies on the ground plane
-        fine = levelling_rotation(a, b)
-    return centre + level.T @ offset, fine @ level
+    keep = _keep(rel)
+    if ground.z is not None:
+        reduction = np.array([centre[0], centre[1], float(ground.z)])
+        return ScanFrame(reduction, np.eye(3), Terrain.flat(), None, keep)
+    near = rel[np.hypot(rel[:, 0], rel[:, 1]) <= REACH]
+    method = ground.vertical if ground.level else "scanner"
+    vertical = vertical_of(Patches.of(near, surfaces), method)
+    u = vertical.up
+    level = levelling_rotation(-u[0] / u[2], -u[1] / u[2])
+    terrain = terrain_of(near @ level.T)
+    h0 = float(terrain.at(np.zeros((1, 2)))[0])
+    reduction = centre + level.T @ np.array([0.0, 0.0, h0])
+    return ScanFrame(reduction, level, terrain.shifted(h0), vertical, keep)
 
 
 def _second_pass(
     scan: ScanChunks,
-    reduction: np.ndarray,
-    level: np.ndarray,
+    frame: ScanFrame,
     slices: SlicesConfig,
     icp_voxel: float,
     kernels: Kernels,
 ) -> tuple[list[np.ndarray], np.ndarray | None]:
-    """The slices (reduced, levelled frame) and, when ``icp_voxel`` > 0, the points thinned to
-    one per ``icp_voxel`` cube (reduced frame, not levelled)."""
+    """The slices (reduced, levelled frame; heights above the ground model) and, when
+    ``icp_voxel`` > 0, the points thinned to one per ``icp_voxel`` cube (reduced frame, not
+    levelled). Stray points (see :class:`ScanFrame`) are left out and counted in the log."""
     parts: list[list[np.ndarray]] = [[] for _ in slices.heights]
     thinner = VoxelThinner(icp_voxel) if icp_voxel > 0 else None
+    far = 0
     for c in scan.chunks():
         try:
-            cut, grouped = kernels.slice_pass(
-                c, reduction, level, slices.heights, slices.thickness, icp_voxel
+            cut = kernels.slice_pass(
+                c,
+                frame.reduction,
+                frame.level,
+                slices.heights,
+                slices.thickness,
+                icp_voxel,
+                frame.terrain,
+                frame.keep,
             )
         except ValueError as exc:
             raise InputError(f"{exc} (scan spans more than 100 km?)", scan.path) from None
-        for k, part in enumerate(cut):
+        for k, part in enumerate(cut.slices):
             parts[k].append(part)
-        if thinner is not None and grouped is not None:
-            thinner.add_grouped(*grouped)
+        if thinner is not None and cut.grouped is not None:
+            thinner.add_grouped(*cut.grouped)
+        far += cut.far
+    if far:
+        log.info("%s: left out %d stray point(s) beyond %.0f m", scan.path, far, frame.keep)
     cut_slices = [np.concatenate(p) if len(p) != 1 else p[0] for p in parts]
     return cut_slices, None if thinner is None else thinner.result()
 
@@ -265,25 +291,33 @@ def prepare_chunks(
     kernels: Kernels = NUMBA,
     inp: InputConfig | None = None,
 ) -> PreparedScan:
-    """Find the reduction point and ground level of a scan and cut its slices.
+    """Find the frame of a scan (reduction point, vertical, ground) and cut its slices.
 
-    Two passes over the chunks: the first takes the bounding box and a regular sample for the
-    ground and the levelling; the second cuts the slices and thins the points for ICP
+    Two passes over the chunks: the first takes a regular sample for the vertical and the
+    ground (:func:`scan_frame`); the second cuts the slices and thins the points for ICP
     (``icp_voxel`` m, 0: no ICP points). Fewer than ``min_points`` slice points is an error.
     """
     first = _first_pass(scan, inp or InputConfig())
-    reduction, level = reduction_and_level(
-        first.lo, first.hi, first.sample, ground, kernels.surfaces
-    )
-    cut, thin = _second_pass(scan, reduction, level, slices, icp_voxel, kernels)
+    frame = scan_frame(first.sample, ground, kernels.surfaces)
+    cut, thin = _second_pass(scan, frame, slices, icp_voxel, kernels)
     if sum(len(s) for s in cut) < min_points:
         raise InputError(
             f"no points in any slice at heights {list(slices.heights)} m above the ground "
-            f"(ground found at z = {reduction[2]:.2f}); check slices.heights or set ground.z",
+            f"(ground found at z = {frame.reduction[2]:.2f}); check slices.heights or set "
+            "ground.z",
             scan.path,
         )
+    reduction = frame.reduction
     return PreparedScan(
-        scan.path, reduction, float(reduction[2]), tuple(cut), first.n_points, level, thin
+        scan.path,
+        reduction,
+        float(reduction[2]),
+        tuple(cut),
+        first.n_points,
+        frame.level,
+        thin,
+        frame.terrain,
+        frame.vertical,
     )
 
 
@@ -321,7 +355,7 @@ def _load_runtime(kernels: Kernels) -> None:
     helper thread while the files are read, it overlaps the reads, which spend their time in
     the disk and in numpy. A failure here is left to the real call to report."""
     try:
-        kernels.slice_pass(np.zeros((1, 3)), np.zeros(3), np.eye(3), [0.0], 0.1, 0.1)
+        kernels.slice_pass(np.zeros((1, 3)), np.zeros(3), np.eye(3), [0.0], 0.1, 0.1, None, 1.0)
     except Exception:  # the same call fails again where its error is reported
         return
 

@@ -93,7 +93,7 @@ class Sight:
 
     @classmethod
     def of_scan(cls, scan: PreparedScan) -> Sight | None:
-        """From a prepared scan's 3D points (its frame; heights in its levelled frame); None
+        """From a prepared scan's 3D points (its frame; heights above its ground model); None
         without 3D points or when they do not surround the frame's origin (not in the
         scanner's own frame)."""
         if scan.points3d is None or len(scan.points3d) < MIN_POINTS:
@@ -101,7 +101,8 @@ class Sight:
         points = scan.points3d + scan.reduction
         if not scanner_inside(points):
             return None
-        return cls.of(points, (scan.points3d @ scan.level.T)[:, 2])
+        levelled = scan.points3d @ scan.level.T
+        return cls.of(points, levelled[:, 2] - scan.terrain.at(levelled[:, :2]))
 
 
 def scanner_inside(points: np.ndarray) -> bool:
