@@ -22,7 +22,6 @@ RANGES: dict[str, tuple[float | None, float | None]] = {
     "input.max_range": (1e-3, 1e5),
     "input.chunk_points": (10_000, 1_000_000_000),
     "ground.z": (-1e7, 1e7),
-    "ground.bin_size": (1e-3, 1.0),
     "slices.thickness": (1e-3, 10.0),
     "grid.min_points": (3, 10_000),
     "grid.min_eigen_ratio": (1e-9, 1.0),
@@ -56,10 +55,12 @@ RANGES: dict[str, tuple[float | None, float | None]] = {
 }
 # the gate's thresholds: (default, how a stricter value goes: "up" or "down", the other bound)
 GATE: dict[str, tuple[float, str, float]] = {
-    "quality.min_score_per_point": (0.12, "up", 10.0),
-    "quality.min_overlap": (0.2, "up", 1.0),
+    "quality.min_score_per_point": (0.0, "up", 10.0),
+    "quality.min_overlap": (0.0, "up", 1.0),
     "quality.max_ambiguity": (0.95, "down", 0.0),
     "quality.min_constraint_ratio": (0.01, "up", 1.0),
+    "quality.min_constraint_ratio_icp": (0.02, "up", 1.0),
+    "quality.max_free_space": (0.10, "down", 0.0),
 }
 MAX_STARTS = 100_000  # search.yaw_starts times the translation grid
 MAX_LEVELS = 12

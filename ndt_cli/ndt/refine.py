@@ -129,6 +129,7 @@ class Refinement:
     T: np.ndarray
     icp: IcpResult | None = None
     rejected: str = ""
+    start: np.ndarray | None = None  # the pose refinement started from (the NDT result)
 
 
 def refine_pose(
@@ -144,7 +145,7 @@ def refine_pose(
     """ICP of the scans' thinned points (each minus its reduction point) from ``T``; a
     correction larger than ``refine.max_correction`` (m, or degrees) is not applied."""
     if target_points is None or source_points is None:
-        return Refinement(T)
+        return Refinement(T, start=T)
     T_red = translation(-target_reduction) @ T @ translation(source_reduction)
     res = icp(
         target_points,
@@ -166,6 +167,10 @@ def refine_pose(
         or moved_deg > refine.max_correction
     ):
         return Refinement(
-            T, res, f"ICP refinement rejected (it moved {moved_m:.2f} m, {moved_deg:.2f} deg)"
+            T,
+            res,
+            f"ICP refinement rejected (it moved {moved_m:.2f} m, {moved_deg:.2f} deg)",
+            T,
         )
-    return Refinement(translation(target_reduction) @ res.T @ translation(-source_reduction), res)
+    T_icp = translation(target_reduction) @ res.T @ translation(-source_reduction)
+    return Refinement(T_icp, res, start=T)

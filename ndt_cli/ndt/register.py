@@ -37,10 +37,11 @@ from ndt_cli.ndt.coarse_to_fine import Ranked, coarse_to_fine, rank, with_verifi
 from ndt_cli.ndt.levels import SourceSampler, TargetMaps, gate_inputs
 from ndt_cli.ndt.precompile import search_kernels_ahead
 from ndt_cli.ndt.prepare import PreparedScan, load_and_prepare_pair
-from ndt_cli.ndt.quality import Fit, Verdict, judge, measure_fit
+from ndt_cli.ndt.quality import Fit, Sights, Verdict, judge, measure_fit
 from ndt_cli.ndt.refine import Refinement, refine_pose
 from ndt_cli.ndt.result import LevelStats, RegistrationResult
 from ndt_cli.ndt.search import global_start, start_search
+from ndt_cli.ndt.terrain import height_offset
 from ndt_cli.ndt.visibility import free_space_share, margin, prefer
 
 
@@ -113,6 +114,15 @@ def _planar(target: PreparedScan, source: PreparedScan, T: np.ndarray) -> np.nda
     return np.array([L[0, 3], L[1, 3], yaw_of(L)])
 
 
+def lifted(target: PreparedScan, source: PreparedScan, pose: np.ndarray) -> np.ndarray:
+    """The 4x4 ``T_target_source`` (the scans' own frames) of a planar ``pose`` (tx, ty, yaw)
+    between their reduced, levelled frames, at the height their ground models agree on
+    (:func:`~ndt_cli.ndt.terrain.height_offset`; 0 when they share no measured ground)."""
+    tz = height_offset(target.terrain, source.terrain, pose)
+    planar = pose2d_matrix(*pose, tz=0.0 if tz is None else tz)
+    return target.from_local() @ planar @ source.to_local()
+
+
 def _refine(
     target: PreparedScan,
     source: PreparedScan,
@@ -124,7 +134,7 @@ def _refine(
     """ICP from the NDT result ``T`` when it is asked for and NDT found a converged overlap
     (``ok``)."""
     if cfg.refine.method != "icp" or not ok:
-        return Refinement(T)
+        return Refinement(T, start=T)
     return refine_pose(
         target.points3d,
         source.points3d,
@@ -139,28 +149,38 @@ def _refine(
 
 def _free_space(
     ranked: Ranked, target: PreparedScan, source: PreparedScan, s: SearchConfig, voxel: float
-) -> tuple[Ranked, str]:
+) -> tuple[Ranked, float, str]:
     """The candidates, the second first when the best contradicts what the scanners saw
-    (:mod:`ndt_cli.ndt.visibility`), and the warning that says so ('' when kept)."""
+    (:mod:`ndt_cli.ndt.visibility`), the free-space share of the pose now second (NaN when not
+    measured) and the note that says the second was kept ('' when not)."""
     if len(ranked.poses) < 2 or s.free_space_ratio <= 0.0:
-        return ranked, ""
+        return ranked, float("nan"), ""
     sights, gap = (target.sight, source.sight), margin(voxel)
     if sights[0] is None or sights[1] is None:
-        return ranked, ""
+        return ranked, float("nan"), ""
     shares = np.array(
-        [
-            free_space_share(
-                *sights, target.from_local() @ pose2d_matrix(*p) @ source.to_local(), gap
-            )
-            for p in ranked.poses[:2]
-        ]
+        [free_space_share(*sights, lifted(target, source, p), gap) for p in ranked.poses[:2]]
     )
     if prefer(shares, s.free_space_ratio, s.free_space_share) == 0:
-        return ranked, ""
-    return ranked.promote(1), (
-        f"free space: the pose of most evidence puts {shares[0]:.0%} of the points into space "
-        f"the other scanner saw empty, the second pose {shares[1]:.0%}; the second is kept"
+        return ranked, float(shares[1]), ""
+    return (
+        ranked.promote(1),
+        float(shares[0]),
+        (
+            f"free space: the pose of most evidence puts {shares[0]:.0%} of the points into space "
+            f"the other scanner saw empty, the second pose {shares[1]:.0%}; the second is kept"
+        ),
     )
+
+
+def _final_free_space(
+    target: PreparedScan, source: PreparedScan, T: np.ndarray, cfg: Config
+) -> float:
+    """The free-space share of the final pose (NaN when the check is off or a scan cannot say
+    what it saw)."""
+    if cfg.search.free_space_ratio <= 0.0 or target.sight is None or source.sight is None:
+        return float("nan")
+    return free_space_share(target.sight, source.sight, T, margin(cfg.refine.voxel))
 
 
 @dataclass(frozen=True)
@@ -174,6 +194,8 @@ class _Stages:
     refinement: Refinement
     verdict: Verdict
     points_per_slice: tuple[int, ...]
+    sights: Sights
+    score_final: float
 
 
 def register_prepared(
@@ -196,7 +218,7 @@ def register_prepared(
     refined = coarse_to_fine(
         start.candidates, schedule, maps, sampler, cfg.optimizer, restarts, kernels
     )
-    ranked, picked = _free_space(
+    ranked, second_share, picked = _free_space(
         rank(refined, schedule[-1]), target, source, cfg.search, cfg.refine.voxel
     )
     gate_map, gate_points = gate_inputs(
@@ -204,12 +226,13 @@ def register_prepared(
     )
     fit = measure_fit(gate_map, gate_points, ranked.poses[0], ranked.ambiguity, kernels)
     converged = bool(ranked.converged[0]) if picked else refined.converged
-    T = target.from_local() @ pose2d_matrix(*ranked.poses[0]) @ source.to_local()
+    T = lifted(target, source, ranked.poses[0])
     t_ndt = time.perf_counter() - t_start
     refinement = _refine(target, source, T, fit.score > 0.0 and converged, cfg, kernels.surfaces)
     moved = _planar(target, source, refinement.T) if refinement.icp is not None else None
     after = None if moved is None else measure_fit(gate_map, gate_points, moved, 0.0, kernels)
-    verdict = judge(fit, converged, refinement, target.level, cfg.quality, after, picked)
+    sights = Sights(_final_free_space(target, source, refinement.T, cfg), second_share, picked)
+    verdict = judge(fit, converged, refinement, target.level, cfg.quality, sights)
     per_slice = tuple(int(n) for n in sampler.fine.per_slice(len(source.slices)))
     stages = _Stages(
         (*start.levels, *refined.levels),
@@ -219,6 +242,8 @@ def register_prepared(
         refinement,
         verdict,
         per_slice,
+        sights,
+        float("nan") if after is None else after.per_point,
     )
     timings = {
         "grid_s": maps.build_s,
@@ -264,6 +289,11 @@ def _result(
         level_target=target.level,
         level_source=source.level,
         icp_centroid=None if icp is None else icp.centroid,
+        T_ndt=s.refinement.start,
+        free_space=s.sights.final,
+        free_space_second=s.sights.second,
+        score_per_point_final=s.score_final,
+        notes=s.verdict.notes,
     )
 
 

@@ -111,6 +111,15 @@ class RegistrationResult:
     level_target: np.ndarray = field(default_factory=lambda: np.eye(3))
     level_source: np.ndarray = field(default_factory=lambda: np.eye(3))
     icp_centroid: np.ndarray | None = None
+    # the NDT result before the refinement (4x4 like T_target_source; None when not kept)
+    T_ndt: np.ndarray | None = None
+    # share of the checked points the final pose puts into space the other scanner saw empty
+    # (ndt_cli.ndt.visibility; NaN when the check cannot run), and the slices' score per point
+    # at the final pose (NaN without ICP)
+    free_space: float = float("nan")
+    score_per_point_final: float = float("nan")
+    free_space_second: float = float("nan")  # that of the second-best pose
+    notes: tuple[str, ...] = field(default=())  # what the gate checked and let pass
 
     def __repr__(self) -> str:
         rot = f"yaw {self.yaw_deg:.4f} deg"
@@ -209,6 +218,11 @@ class RegistrationResult:
             "level_target": _list(self.level_target),
             "level_source": _list(self.level_source),
             "icp_centroid": _list(self.icp_centroid),
+            "T_ndt": _list(self.T_ndt),
+            "free_space": self.free_space,
+            "free_space_second": self.free_space_second,
+            "score_per_point_final": self.score_per_point_final,
+            "notes": list(self.notes),
         }
 
     @classmethod
@@ -224,6 +238,7 @@ class RegistrationResult:
             candidates=tuple(Candidate(**c) for c in d["candidates"]),
             hessian=np.array(d["hessian"], dtype=float),
             warnings=tuple(d["warnings"]),
+            notes=tuple(d.get("notes", ())),
             icp_hessian=_array(d.get("icp_hessian")),
             weak_direction=_array(d.get("weak_direction")),
             timings=dict(d.get("timings", {})),
@@ -232,6 +247,7 @@ class RegistrationResult:
             level_target=np.array(d["level_target"], dtype=float),
             level_source=np.array(d["level_source"], dtype=float),
             icp_centroid=_array(d.get("icp_centroid")),
+            T_ndt=_array(d.get("T_ndt")),
         )
         return cls(**kw)
 

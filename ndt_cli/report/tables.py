@@ -38,6 +38,9 @@ METRICS: dict[str, Callable[[RegistrationResult], str]] = {
     "overlap_3d": lambda r: num(r.overlap_3d, 4),
     "icp_rms": lambda r: num(r.icp_rms, 5),
     "icp_inliers": lambda r: str(r.icp_inliers),
+    "free_space": lambda r: num(r.free_space, 4),
+    "tilt_target_deg": lambda r: num(_tilt(r.level_target), 4),
+    "tilt_source_deg": lambda r: num(_tilt(r.level_source), 4),
     "hessian_eigenvalues": lambda r: _joined(r.hessian_eigenvalues),
     "icp_hessian_eigenvalues": lambda r: _joined(r.icp_hessian_eigenvalues),
     "degenerate": lambda r: r.degenerate,
@@ -47,8 +50,16 @@ METRICS: dict[str, Callable[[RegistrationResult], str]] = {
     "converged": lambda r: str(r.converged).lower(),
     "status": lambda r: r.status.value,
     "warnings": lambda r: " | ".join(r.warnings),
+    "notes": lambda r: " | ".join(r.notes),
     "runtime_s": lambda r: f"{r.runtime_s:.3f}",
 }
+
+
+def _tilt(level: np.ndarray) -> float:
+    """Angle (degrees) between a scan's z axis and the vertical it was levelled to."""
+    return float(np.degrees(np.arccos(np.clip(level[2, 2], -1.0, 1.0))))
+
+
 # what a link without a result (failed) shows in the metric columns
 _FAILED = {"icp_inliers": "0", "iterations": "0", "converged": "false", "runtime_s": "0.000"}
 
@@ -59,24 +70,25 @@ def _names(*lines: str) -> tuple[str, ...]:
 
 
 _POSE_AND_FIT = (
-    "tx ty tz yaw_deg score score_per_point overlap ambiguity overlap_3d icp_rms icp_inliers"
+    "tx ty tz yaw_deg score score_per_point overlap ambiguity overlap_3d icp_rms icp_inliers "
+    "free_space tilt_target_deg tilt_source_deg"
 )
 REPORT_COLUMNS = _names(
     "target source",
     _POSE_AND_FIT,
     "hessian_eigenvalues icp_hessian_eigenvalues degenerate points_per_slice",
-    "iterations_per_level converged status warnings runtime_s",
+    "iterations_per_level converged status warnings notes runtime_s",
 )
 PAIR_COLUMNS = _names(
     "link target source",
     _POSE_AND_FIT,
-    "degenerate iterations converged runtime_s status reason",
+    "degenerate iterations converged runtime_s status reason notes",
     "kind network residual_deg residual_cm",
 )
 POSE_COLUMNS = _names(
     "scan file has_pose x y z yaw_deg",
     *(f"m{r}{c}" for r in range(4) for c in range(4)),
-    "status sigma_x_cm sigma_y_cm sigma_z_cm sigma_yaw_deg reason",
+    "status cluster sigma_x_cm sigma_y_cm sigma_z_cm sigma_yaw_deg tilt_deg reason",
 )
 
 
@@ -106,10 +118,13 @@ def pair_row(link: Any, names: tuple[str, ...], fit: Any = None) -> dict[str, An
     return row
 
 
-def pose_row(k: int, name: str, T: np.ndarray | None, scan: Any = None) -> dict[str, Any]:
+def pose_row(
+    k: int, name: str, T: np.ndarray | None, scan: Any = None, level: np.ndarray | None = None
+) -> dict[str, Any]:
     """The row of ``poses.csv`` of scan ``k``: its name, T_world_scan (empty without one) and,
     from the network (a :class:`~ndt_cli.pipeline.solution.ScanPose`), its status, 1-sigma
-    uncertainty and why it is not ok."""
+    uncertainty and why it is not ok; ``level``: its levelling rotation (its tilt from the
+    vertical), None when no link prepared it."""
     row: dict[str, Any] = {"scan": k, "file": name, "has_pose": str(T is not None).lower()}
     M = T if T is not None else np.full((4, 4), np.nan)
     row.update(x=num(M[0, 3]), y=num(M[1, 3]), z=num(M[2, 3]))
@@ -119,6 +134,9 @@ def pose_row(k: int, name: str, T: np.ndarray | None, scan: Any = None) -> dict[
     )
     sigma = None if scan is None else scan.sigma
     row["status"] = "" if scan is None else scan.status.value
+    cluster = None if scan is None else scan.cluster
+    row["cluster"] = "" if cluster is None else str(cluster)
+    row["tilt_deg"] = "" if level is None else num(_tilt(level), 4)
     row["reason"] = "" if scan is None else scan.reason
     for key, value, scale, digits in zip(
         ("sigma_x_cm", "sigma_y_cm", "sigma_z_cm", "sigma_yaw_deg"),
