@@ -352,8 +352,7 @@ def test_gross_outlier_is_rejected_and_poses_stay_correct(bad):
     assert worst["cauchy"] < 0.05 and worst["huber"] < 0.2 < 0.5 < worst["none"]
 
 
-@pytest.mark.parametrize("batch", [False, True])
-def test_outliers_apart_and_together_one_at_a_time_or_in_batches(batch):
+def test_outliers_apart_and_together_are_rejected():
 
     rng = np.random.default_rng(15)
     truth = street(rng, n=16)
@@ -363,12 +362,11 @@ def test_outliers_apart_and_together_one_at_a_time_or_in_batches(batch):
         measured(truth, i, j, rng, error=rng.normal(0, 1.0, 3) if (i, j) in wrong else None)
         for i, j in pairs
     ]
-    result = verify(16, 0, edges, batch=batch)
+    result = verify(16, 0, edges)
     rejected = {pairs[k] for k, s in enumerate(result.states()) if s is EdgeState.REJECTED}
     assert rejected == wrong
     assert all(s is NodeStatus.OK for s in result.statuses())
     assert errors_m(result.poses, truth).max() < 0.1
-    assert result.solves == (3 if batch else 4)  # batch: the far outlier goes in round 1
 
 
 def test_a_wrong_link_in_a_cut_of_two_is_ambiguous_and_said_so():
@@ -397,17 +395,17 @@ def test_node_reached_only_by_wrong_untrusted_links_is_suspect_not_ok():
         measured(truth, 7, 8, rng, trusted=False, error=[-1.0, 4.0, 0.0]),
     ]
     result = verify(9, 0, edges)
-    assert result.states()[-2:] == (EdgeState.UNUSED, EdgeState.UNUSED)
+    # the two disagree: one is rejected, the other is an unchecked bridge to node 8
+    assert sorted(s.value for s in result.states()[-2:]) == ["rejected", "unused"]
     node = result.nodes[8]
-    assert node.status is NodeStatus.SUSPECT
-    assert node.via == len(edges) - 2  # composed from node 6, the first ok node reached
-    expected = result.nodes[6].pose @ edges[-2].T_target_source
+    assert node.status is NodeStatus.SUSPECT and "unused link" in node.reason
+    via = edges[node.via]
+    expected = result.nodes[via.target].pose @ via.T_target_source
     assert np.allclose(node.pose, expected)
-    assert "unused link" in node.reason
     assert all(n.status is NodeStatus.OK for n in result.nodes[:8])
 
 
-def test_disconnected_nodes_are_unposed_and_do_not_break_the_solver():
+def test_disconnected_nodes_form_a_cluster_in_their_first_nodes_frame():
 
     rng = np.random.default_rng(13)
     truth = street(rng, n=11)
@@ -416,11 +414,15 @@ def test_disconnected_nodes_are_unposed_and_do_not_break_the_solver():
     assert [p is None for p in result.poses] == [False] * 8 + [True] * 3
     assert result.residuals[-1] is None and result.covariances[9] is None
     checked = verify(11, 0, edges)
-    assert checked.statuses()[8:] == (NodeStatus.UNPOSED,) * 3
-    assert checked.nodes[8].reason == "no link"
-    assert "anchor" in checked.nodes[9].reason
+    assert checked.clusters() == (0,) * 8 + (None, 1, 1)
+    assert checked.statuses()[8] is NodeStatus.UNPOSED and checked.nodes[8].reason == "no link"
+    assert checked.statuses()[9:] == (NodeStatus.OK,) * 2  # ok within their own cluster
+    assert np.allclose(checked.poses[9], np.eye(4))
+    relative = np.linalg.inv(truth[9]) @ truth[10]
+    assert np.linalg.norm(checked.poses[10][:3, 3] - relative[:3, 3]) < 0.05
     assert checked.states()[-1] is EdgeState.USED  # a bridge of its own group
     assert errors_m(checked.poses[:8], truth[:8]).max() < 0.05
+    assert checked.roots == {0: 0, 1: 9}
 
 
 def test_loop_closure_reduces_the_end_error_versus_chaining():
@@ -453,7 +455,7 @@ def test_untrusted_links_are_confirmed_when_consistent_and_rejected_when_not():
         assert result.states()[-3:] == (EdgeState.CONFIRMED,) * 2 + (EdgeState.REJECTED,)
         assert all(s is EdgeState.CONFIRMED for s in result.states()[:-3])
         assert all(s is NodeStatus.OK for s in result.statuses())
-        assert "untrusted" in result.edges[-1].reason and result.solves == 2
+        assert "chi2" in result.edges[-1].reason
 
 
 def test_a_chain_without_cycles_is_used_not_confirmed():
@@ -489,14 +491,14 @@ def test_edges_and_inputs_are_checked():
     # a node whose every link was rejected is unposed and the reason names them
     edges = [Edge(0, 1, np.eye(4), cov), Edge(1, 2, np.eye(4), cov)]
     adj = Adjustment((np.eye(4), np.eye(4), None), (None,) * 3, (None,) * 2, 0, 0.0)
-    nodes = _node_verdicts(edges, [EdgeState.USED, EdgeState.REJECTED], adj)
+    nodes = _node_verdicts(edges, [EdgeState.USED, EdgeState.REJECTED], adj, [0, 0, None])
     assert nodes[2].status is NodeStatus.UNPOSED and nodes[2].reason == "only rejected links: 1"
     assert "T_0_1" in repr(edges[0]) and "unposed" in repr(nodes[2])
 
 
 def test_bad_arguments_are_refused():
 
-    edges = [Edge(0, 1, np.eye(4), np.eye(6) * 1e-4)]
+    edges = [Edge(0, 1, np.eye(4), np.eye(6) * 1e-6)]  # 0.06 deg, 1 mm
     with pytest.raises(ValueError):
         adjust(2, 2, edges)
     with pytest.raises(ValueError):
@@ -507,3 +509,72 @@ def test_bad_arguments_are_refused():
         adjust(2, 0, edges, kernel="tukey")
     result = verify(2, 0, edges)
     assert "used 1" in repr(result) and "ok 2" in repr(result)
+
+
+def test_links_none_of_which_passed_its_gate_confirm_each_other_around_cycles():
+
+    rng = np.random.default_rng(21)
+    truth = street(rng, n=16)
+    pairs = [(i, i + 1) for i in range(15)] + [(i, i + 2) for i in range(14)]
+    doubted = {(7, 8), (6, 8), (7, 9)}  # right, but none passed its own gate
+    edges = [measured(truth, i, j, rng, trusted=(i, j) not in doubted) for i, j in pairs]
+    result = verify(16, 0, edges)
+    assert all(s is EdgeState.CONFIRMED for s in result.states())
+    assert all(s is NodeStatus.OK for s in result.statuses())
+    assert result.clusters() == (0,) * 16
+
+
+def test_a_cut_of_two_gives_up_the_link_its_gate_doubted():
+
+    rng = np.random.default_rng(22)
+    truth = street(rng, n=8)
+    edges = [measured(truth, i, j, rng) for i, j in CHAIN + SKIPS]
+    k_bad = len(CHAIN) + SKIPS.index((5, 7))
+    edges[k_bad] = measured(truth, 5, 7, rng, trusted=False, error=[0.0, 2.0, 0.0])
+    result = verify(8, 0, edges)
+    assert result.states()[k_bad] is EdgeState.REJECTED
+    assert result.states()[CHAIN.index((6, 7))] is EdgeState.USED  # now a bridge
+    assert all(s is NodeStatus.OK for s in result.statuses())
+    assert errors_m(result.poses, truth).max() < 0.05
+
+
+def test_a_busy_street_keeps_its_right_links_whatever_their_gates_said():
+
+    rng = np.random.default_rng(23)
+    truth = street(rng, n=10)
+    pairs = [(i, i + 1) for i in range(9)] + [(i, i + 2) for i in range(8)]
+    wrong = {(0, 2), (1, 3), (2, 4), (4, 6), (5, 7), (7, 9)}  # 6 of 8 skip links, metres off
+    doubted = {(3, 4), (6, 7)}  # right adjacent links that failed their gates
+    edges = []
+    for i, j in pairs:
+        error = rng.uniform(-50, 50, 3) * [1, 1, 0] if (i, j) in wrong else None
+        edges.append(measured(truth, i, j, rng, trusted=(i, j) not in wrong | doubted, error=error))
+    result = verify(10, 0, edges)
+    rejected = {pairs[k] for k, s in enumerate(result.states()) if s is EdgeState.REJECTED}
+    assert rejected == wrong
+    kept = {pairs[k] for k, s in enumerate(result.states()) if s is not EdgeState.REJECTED}
+    assert doubted <= kept
+    assert all(s is NodeStatus.OK for s in result.statuses())
+    clean = adjust(10, 0, [e for k, e in enumerate(edges) if pairs[k] not in wrong])
+    assert np.abs(errors_m(result.poses, clean.poses)).max() < 1e-4
+
+
+def test_links_weak_along_one_direction_leave_the_scans_suspect_however_well_they_agree():
+
+    rng = np.random.default_rng(24)
+    truth = street(rng, n=6)
+    edges = []
+    for i, j in [(i, i + 1) for i in range(5)] + [(i, i + 2) for i in range(4)]:
+        e = measured(truth, i, j, rng)
+        C = e.covariance.copy()
+        axis = np.linalg.inv(truth[j])[:3, :3] @ np.linalg.inv(truth[i])[:3, :3].T @ [1, 0, 0]
+        axis = truth[j][:3, :3].T @ [1.0, 0.0, 0.0]  # the world's x in the source's body frame
+        C[3:, 3:] += 1e4 * np.outer(axis, axis)  # a corridor along world x: 100 m sigma
+        T = e.T_target_source.copy()
+        T[:3, 3] += truth[i][:3, :3].T @ [rng.uniform(-8, 8), 0.0, 0.0]  # slid along it
+        edges.append(Edge(i, j, T, C, trusted=False))
+    result = verify(6, 0, edges)
+    assert all(s is EdgeState.CONFIRMED for s in result.states())  # they agree, trivially
+    assert result.statuses()[0] is NodeStatus.OK
+    assert all(s is NodeStatus.SUSPECT for s in result.statuses()[1:])
+    assert all("not pinned down" in n.reason for n in result.nodes[1:])

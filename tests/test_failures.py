@@ -67,10 +67,12 @@ def test_a_key_given_twice_is_an_error(tmp_path):
 @pytest.mark.parametrize(
     ("section", "values", "needle"),
     [
-        ("quality", {"min_score_per_point": 0.05}, "may not be below its default"),
+        ("quality", {"min_score_per_point": -0.05}, "may not be below its default"),
         ("quality", {"max_ambiguity": 1.0}, "may not be above its default"),
-        ("quality", {"min_overlap": 0.0}, "may not be below its default"),
+        ("quality", {"min_overlap": -0.1}, "may not be below its default"),
         ("quality", {"min_constraint_ratio": 0.0}, "may not be below its default"),
+        ("quality", {"min_constraint_ratio_icp": 0.01}, "may not be below its default"),
+        ("quality", {"max_free_space": 0.2}, "may not be above its default"),
         ("search", {"keep_candidates": 1}, "search.keep_candidates"),
     ],
 )
@@ -387,7 +389,7 @@ def test_unreadable_files_and_folders_are_one_line_as_another_user():
 def test_scans_behind_a_bad_link_get_no_pose(tmp_path):
     from conftest import street_files
 
-    files, _ = street_files(tmp_path, n_scans=4)
+    files, truth = street_files(tmp_path, n_scans=4)
     from ndt_cli import sim
 
     _, other, _ = sim.make_sequence(seed=77, n_scans=1, scan_kwargs={"n_azimuth": 1000})
@@ -397,4 +399,8 @@ def test_scans_behind_a_bad_link_get_no_pose(tmp_path):
     poses = read_pose_list(tmp_path / "o" / "poses.txt")
     rows = (tmp_path / "o" / "pairs.csv").read_text().splitlines()[1:]
     assert ",ok," not in rows[0] and ",ok," not in rows[1]  # both links of the foreign scan
-    assert set(poses) == {"scan_0.laz"}  # nothing is posed through them
+    assert "scan_1.laz" not in poses  # nothing is posed through them: the skip link around
+    for name in set(poses) - {"scan_0.laz"}:  # the foreign scan poses the others, rightly
+        k = int(name[5])
+        rot, trans = transform_errors(poses[name], np.linalg.inv(truth[0]) @ truth[k])
+        assert rot < 0.1 and trans < 0.05, (name, rot, trans)

@@ -207,11 +207,18 @@ def _check(
         raise ValueError(f"kernel must be one of {_KERNELS}, not {kernel!r}")
 
 
-def adjustment_of(solver: Solver, sol: Solution, with_marginals: bool, t0: float) -> Adjustment:
-    """The :class:`Adjustment` of the anchor's component of a solution."""
+def adjustment_of(
+    solver: Solver, sol: Solution, with_marginals: bool, t0: float, every_component: bool = False
+) -> Adjustment:
+    """The :class:`Adjustment` of the anchor's component of a solution (``every_component``:
+    of every component it solved, each in the frame it was held in)."""
     home = sol.labels[solver.anchor]
-    poses = [p if sol.labels[v] == home else None for v, p in enumerate(sol.poses)]
-    ids = [k for k in sol.ids if sol.labels[solver.edges[k].target] == home]
+    if every_component:
+        poses = list(sol.poses)
+        ids = list(sol.ids)
+    else:
+        poses = [p if sol.labels[v] == home else None for v, p in enumerate(sol.poses)]
+        ids = [k for k in sol.ids if sol.labels[solver.edges[k].target] == home]
     found = residuals(solver.edges, ids, poses, solver.sqrt_info)
     covs: list[np.ndarray | None] = [None] * solver.n
     t1 = time.perf_counter()

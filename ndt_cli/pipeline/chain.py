@@ -83,8 +83,8 @@ class ChainResult:
 
     @property
     def ok(self) -> bool:
-        """Every scan has a trustworthy pose."""
-        return all(s.status is NodeStatus.OK for s in self.solution.scans)
+        """Every scan has a trustworthy pose in the anchor's frame (one cluster)."""
+        return all(s.anchored for s in self.solution.scans)
 
 
 def plan_links(n_scans: int, unreadable: set[int]) -> list[tuple[int, int]]:
@@ -322,7 +322,10 @@ def _close_loops(run: _ChainRun, step: _Step, net: NetworkOptions, anchor: int) 
         radius = LOOP_RADIUS_FACTOR * median_adjacent_length(step.planned, first.poses)
     if not np.isfinite(radius):
         return float("nan")
-    ok = [s.T_world_scan if s.status is NodeStatus.OK else None for s in first.scans]
+    ok = [  # positions in the anchor's frame: the scans of its cluster only
+        s.T_world_scan if s.status is NodeStatus.OK and s.cluster == 0 else None
+        for s in first.scans
+    ]
     loops = plan_loops(ok, step.planned, radius)
     if loops:
         guesses = {(k.target, k.source): _guess(first, k) for k in loops}

@@ -1,15 +1,17 @@
 """From a campaign's links to a pose and a status per scan.
 
 With the adjustment (the default), every link with a transform becomes an edge of the pose
-graph: ``ok`` links are trusted, ``suspect`` and ``degenerate`` ones must be confirmed by the
-others (:mod:`ndt_cli.pipeline.verify`); each scan is ``ok`` when accepted links connect it to
-the anchor, ``suspect`` when only untested links reach it, ``unposed`` otherwise. Without it,
-poses are the products of ok links along the fewest links from the anchor (one neighbour: the
-classic chain), and a scan reached through anything but ok links is not ``ok``.
+graph, and the links that agree with each other are kept whatever their own gates said
+(:mod:`ndt_cli.pipeline.verify`); each scan is ``ok`` when kept links tie it to its cluster
+and pin its pose down, ``suspect`` when only unchecked links reach it or its pose is free
+along some direction, ``unposed`` otherwise. Without it, poses are the products of ok links
+along the fewest links from the anchor (one neighbour: the classic chain), and a scan reached
+through anything but ok links is not ``ok``.
 
-Frames: the world is the anchor scan's own frame. The graph works between the scans' reduced
-frames (each scan minus its reduction point), so that georeferenced coordinates never enter it;
-``T_world_scan = T(r_anchor) X_scan T(-r_scan)``.
+Frames: the world is the anchor scan's own frame; the scans of another cluster (no kept link
+ties them to the anchor's) are in the frame of that cluster's first scan. The graph works
+between the scans' reduced frames (each scan minus its reduction point), so that georeferenced
+coordinates never enter it: ``T_world_scan = T(r_root) X_scan T(-r_scan)``.
 """
 
 from __future__ import annotations
@@ -38,6 +40,12 @@ class ScanPose:
     T_world_scan: np.ndarray | None
     sigma: np.ndarray | None = None  # (4,): x, y, z (m), yaw (deg)
     reason: str = ""
+    cluster: int | None = None  # 0: the anchor's; the others in their first scan's frame
+
+    @property
+    def anchored(self) -> bool:
+        """Ok in the anchor's frame (cluster 0): what poses.txt and the export give."""
+        return self.status is NodeStatus.OK and self.cluster == 0
 
 
 @dataclass(frozen=True)
@@ -127,7 +135,7 @@ def solve(
         return _adjusted(n_scans, anchor, links, unreadable, plain)
     poses = chained(n_scans, links, anchor, set(LinkKind))
     scans = tuple(
-        ScanPose(NodeStatus.OK, T)
+        ScanPose(NodeStatus.OK, T, cluster=0)
         if T is not None
         else ScanPose(NodeStatus.UNPOSED, None, reason=_why_unposed(k, links, unreadable))
         for k, T in enumerate(poses)
@@ -159,13 +167,6 @@ def _adjusted(
     """Verify and adjust the network of usable links; map nodes and edges back."""
     used = [k for k, link in enumerate(links) if link.status in USABLE]
     red = reductions(n_scans, links)
-    if red[anchor] is None:
-        scans = tuple(
-            ScanPose(NodeStatus.UNPOSED, None, reason="the anchor scan has no usable link")
-            for _ in range(n_scans)
-        )
-        fits = tuple(LinkFit(EdgeState.UNUSED, reason=k.reason) for k in links)
-        return NetworkSolution(scans, fits, plain, adjusted=True)
     edges = [
         Edge(
             links[k].target,
@@ -177,7 +178,7 @@ def _adjusted(
         for k in used
     ]
     v = verify(n_scans, anchor, edges)
-    scans = tuple(_scan_pose(node, red, anchor, unreadable, links) for node in v.nodes)
+    scans = tuple(_scan_pose(node, red, v.roots, unreadable, links) for node in v.nodes)
     fits = [LinkFit(EdgeState.UNUSED, reason=k.reason or k.status.value) for k in links]
     for verdict, k in zip(v.edges, used, strict=True):
         fits[k] = LinkFit(verdict.state, verdict.residual, verdict.reason)
@@ -187,16 +188,20 @@ def _adjusted(
 def _scan_pose(
     node: NodeVerdict,
     red: Sequence[np.ndarray | None],
-    anchor: int,
+    roots: dict[int, int],
     unreadable: dict[int, str],
     links: Sequence[Link],
 ) -> ScanPose:
-    """A node's verdict as a scan's pose in the world (the anchor's own frame)."""
+    """A node's verdict as a scan's pose in its cluster's world (its root scan's own frame)."""
     k = node.index
-    if node.pose is None or red[k] is None:
+    if k in unreadable or node.pose is None or node.cluster is None:
         reason = _why_unposed(k, links, unreadable) if k in unreadable else node.reason
         return ScanPose(NodeStatus.UNPOSED, None, reason=reason)
-    T = _translation(red[anchor]) @ node.pose @ _translation(-red[k])
+    root = roots[node.cluster]
+    if red[k] is None or red[root] is None:  # a lone anchor: no link gave its reduction
+        T = np.eye(4)
+    else:
+        T = _translation(red[root]) @ node.pose @ _translation(-red[k])
     sigma = None
     if node.covariance is not None:
         R = node.pose[:3, :3]
@@ -204,4 +209,4 @@ def _scan_pose(
         cov_r = R @ node.covariance[:3, :3] @ R.T
         sigma = np.array([*np.sqrt(np.diag(cov_t)), np.degrees(np.sqrt(cov_r[2, 2]))])
     reason = "" if node.status is NodeStatus.OK else node.reason
-    return ScanPose(node.status, T, sigma, reason)
+    return ScanPose(node.status, T, sigma, reason, node.cluster)

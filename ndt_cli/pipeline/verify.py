@@ -1,24 +1,42 @@
-"""Verification of a network's links by consistency, and a trustworthy status per scan.
+"""Which links of a network to believe, and a trustworthy status per scan: trust that follows
+the evidence.
 
-Accepted links start as the trusted ones (their own quality gate said ok); the worst accepted
-link whose residual exceeds the chi-square threshold is rejected and the network solved again,
-until none does. Untrusted links whose scans are both posed are then tested against the
-adjustment: consistent ones are confirmed and used, the others rejected. A scan is ok when
-accepted links connect it to the anchor; a link that is a bridge cannot be checked (used, not
-confirmed); a scan reachable only through untested links is suspect; others are unposed.
+A link's own quality gate is one piece of evidence; agreement with other links is another, and
+a strong one: independent wrong registrations do not agree around a cycle to within their
+uncertainties by chance. So every usable link, ok or not, takes part in the adjustment, and the
+links that disagree are found as a surveyor's network adjustment finds blunders (Baarda's data
+snooping): solve (Huber's kernel, then Cauchy's from there: a blunder pulls with a bounded,
+then a vanishing force), test every link's misfit against the chi-square threshold, give up
+the link whose removal leaves the least disagreement (tried with Huber's convex kernel) and
+solve again, until every link that lies on a cycle passes in both solutions; the kept links
+are then adjusted with Huber's kernel. Between a link its gate passed and one it doubted, the
+doubted one goes first: a gate-ok link's chi-square counts :data:`TRUST` times smaller in the
+ranking and its removal costs that much more (never in the test).
+
+- A kept link on a cycle of kept links is **confirmed**, whatever its gate said: the cycle
+  checked it.
+- A kept link on no cycle (a bridge) cannot be checked: it is **used** when its own gate passed,
+  and **unused** otherwise; scans behind an unused link are suspect, never ok.
+- A link that disagrees is **rejected**.
+
+A scan is **ok** when kept links tie it to its cluster's first scan and the adjustment pins
+its pose down: a cycle of links that are all weak along one direction (a corridor's, which can
+agree on a wrong slide) leaves the pose free along it, and a scan whose horizontal position or
+heading has a standard deviation above :data:`MAX_SIGMA_M` / :data:`MAX_SIGMA_DEG` is suspect.
+Kept links split the scans into **clusters**: 0 holds the anchor, then 1, 2, ... by size; each
+is adjusted in the frame of its lowest-numbered scan.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 
 import numpy as np
 
 from ndt_cli.pipeline.adjust import Adjustment, Solution, Solver, adjustment_of
-from ndt_cli.pipeline.covariance import relative_covariance, se3_log
 from ndt_cli.pipeline.graph import (
     CHI2_6_999,
     Edge,
@@ -29,14 +47,17 @@ from ndt_cli.pipeline.graph import (
     residuals,
 )
 
+MAX_SIGMA_M = 0.2  # m: a scan whose adjusted horizontal position is less certain is suspect
+MAX_SIGMA_DEG = 0.2  # degrees: likewise for its heading
+
 
 class EdgeState(StrEnum):
     """What :func:`verify` made of a link.
 
-    ``confirmed``: checked by consistency and kept (on a cycle of kept links within the
-    threshold, or an untrusted link that agreed with the adjustment); ``used``: kept but not
-    checkable (a bridge: no cycle of kept links passes through it); ``rejected``: inconsistent;
-    ``unused``: untrusted and not testable (its nodes are not posed together), left out.
+    ``confirmed``: on a cycle of kept links, within the threshold; ``used``: kept on its own
+    gate's word (a bridge: no cycle of kept links passes through it); ``rejected``: it
+    disagrees with the links kept; ``unused``: neither checkable nor ok by its gate (a bridge
+    whose gate failed, or its scans are not posed together), left out.
     """
 
     CONFIRMED = "confirmed"
@@ -46,8 +67,8 @@ class EdgeState(StrEnum):
 
 
 class NodeStatus(StrEnum):
-    """``ok``: posed by the adjustment (connected to the anchor through kept links);
-    ``suspect``: posed only through an unused (untrusted, untested) link; ``unposed``."""
+    """``ok``: posed by the adjustment of kept links, its pose pinned down; ``suspect``: posed
+    only through an unused link, or its pose free along some direction; ``unposed``."""
 
     OK = "ok"
     SUSPECT = "suspect"
@@ -57,7 +78,7 @@ class NodeStatus(StrEnum):
 @dataclass(frozen=True, repr=False)
 class EdgeVerdict:
     """One link after :func:`verify`: its state, why, and its residual against the final
-    poses (None unless both nodes are posed, ok or suspect)."""
+    poses (None unless both nodes are posed in one cluster)."""
 
     index: int
     target: int
@@ -80,8 +101,9 @@ class EdgeVerdict:
 
 @dataclass(frozen=True, repr=False)
 class NodeVerdict:
-    """One node after :func:`verify`: status, ``T_world_node`` (None when unposed), its 6x6
-    covariance (ok nodes only), ``via`` (suspect: the unused edge its pose goes through)."""
+    """One node after :func:`verify`: status, ``T_root_node`` in its cluster's frame (None when
+    unposed), its 6x6 covariance (nodes the adjustment posed), ``via`` (suspect through an
+    unused edge: that edge), and its ``cluster`` (None when unposed)."""
 
     index: int
     status: NodeStatus
@@ -89,19 +111,23 @@ class NodeVerdict:
     covariance: np.ndarray | None
     reason: str
     via: int | None = None
+    cluster: int | None = None
 
     def __repr__(self) -> str:
         where = (
             "" if self.pose is None else " at ({:.3f}, {:.3f}, {:.3f}) m".format(*self.pose[:3, 3])
         )
-        return f"NodeVerdict({self.index}: {self.status.value}{where}; {self.reason})"
+        return (
+            f"NodeVerdict({self.index}: {self.status.value}, cluster {self.cluster}{where}; "
+            f"{self.reason})"
+        )
 
 
 @dataclass(frozen=True, repr=False)
 class Verification:
     """Result of :func:`verify`: a verdict per edge and per node (input order), the final
-    :class:`Adjustment` of the kept links, the chi-square threshold, the number of solves and
-    the times (s): all, the solves, the tests of untrusted links, the final marginals."""
+    :class:`Adjustment` of the kept links (every cluster), the chi-square threshold, the
+    number of solves and the times (s): all, the consensus, the solves, the marginals."""
 
     edges: tuple[EdgeVerdict, ...]
     nodes: tuple[NodeVerdict, ...]
@@ -109,11 +135,12 @@ class Verification:
     threshold: float
     solves: int
     time_s: float
-    timings: dict[str, float] = field(default_factory=dict)  # s: solve_s, test_s, marginals_s
+    timings: dict[str, float] = field(default_factory=dict)
+    roots: dict[int, int] = field(default_factory=dict)  # cluster -> the node of its frame
 
     @property
     def poses(self) -> tuple[np.ndarray | None, ...]:
-        """``T_world_node`` of ok and suspect nodes, None for unposed ones."""
+        """``T_root_node`` of ok and suspect nodes (their cluster's frame), None for unposed."""
         return tuple(n.pose for n in self.nodes)
 
     def states(self) -> tuple[EdgeState, ...]:
@@ -122,155 +149,234 @@ class Verification:
     def statuses(self) -> tuple[NodeStatus, ...]:
         return tuple(n.status for n in self.nodes)
 
+    def clusters(self) -> tuple[int | None, ...]:
+        return tuple(n.cluster for n in self.nodes)
+
     def __repr__(self) -> str:
         edges = ", ".join(f"{s.value} {sum(e.state is s for e in self.edges)}" for s in EdgeState)
         nodes = ", ".join(f"{s.value} {sum(n.status is s for n in self.nodes)}" for s in NodeStatus)
+        n_clusters = len({c for c in self.clusters() if c is not None})
         return (
-            f"Verification(edges: {edges}; nodes: {nodes}; threshold {self.threshold:.2f}, "
-            f"{self.solves} solves, {self.time_s:.3f} s)"
+            f"Verification(edges: {edges}; nodes: {nodes}; {n_clusters} cluster(s); threshold "
+            f"{self.threshold:.2f}, {self.solves} solves, {self.time_s:.3f} s)"
         )
 
 
+def _trusted_first(solver: Solver) -> list[np.ndarray | None]:
+    """Initial poses composed breadth-first from each component's root, through the gate-ok
+    links before any other: a wrong untrusted link starts far from agreeing."""
+    edges, guess = solver.edges, list(solver.guess)
+    trusted = [k for k, e in enumerate(edges) if e.trusted]
+    labels = components(solver.n, [(edges[k].target, edges[k].source) for k in range(len(edges))])
+    roots: dict[int, int] = {}
+    for v in range(solver.n):
+        roots.setdefault(int(labels[v]), v)
+    roots[int(labels[solver.anchor])] = solver.anchor
+    posed = {r: np.eye(4) if guess[r] is None else guess[r] for r in roots.values()}
+    posed.update({v: p for v, p in enumerate(guess) if p is not None})
+    first, _ = compose(edges, trusted, posed)
+    every, _ = compose(edges, range(len(edges)), first)
+    return [every.get(v) for v in range(solver.n)]
+
+
+TRUST = 4.0  # between links that misfit, a gate-ok link is given up only when its chi-square
+# is this many times that of the worst doubted one: of two links of which one must go (a cut of
+# two), the one its own gate doubted goes
+LOOKAHEAD = 3  # links tried at each step: masking by several blunders next to each other
+
+
 class _Verifier:
-    """State of one :func:`verify` run: which edges are accepted, rejected (with the reason)
-    and, among the untrusted ones, confirmed by their test (with the reason)."""
+    """State of one :func:`verify` run: which edges are kept, and why the others are not."""
 
-    def __init__(self, solver: Solver, threshold: float, batch: bool) -> None:
-        self.solver, self.edges, self.threshold, self.batch = solver, solver.edges, threshold, batch
-        self.accepted = {k for k, e in enumerate(self.edges) if e.trusted}
+    def __init__(self, solver: Solver, trial: Solver, threshold: float) -> None:
+        self.solver, self.trial, self.edges = solver, trial, solver.edges
+        self.threshold = threshold
+        self.kept: set[int] = set()
+        self.born_bridges = bridges(solver.n, self.edges, range(len(self.edges)))
         self.rejected: dict[int, str] = {}
-        self.tested: dict[int, str] = {}
-        self.last: dict[int, EdgeResidual] = {}
-        self.born_bridges = bridges(solver.n, self.edges, sorted(self.accepted))
-        self.test_s = 0.0
+        self.last: dict[int, EdgeResidual] = {}  # the Cauchy solution's residuals
+        self.convex: dict[int, EdgeResidual] = {}  # the Huber solution's
 
-    def reject_until_consistent(self, guess: Sequence[np.ndarray | None]) -> Solution:
-        """Solve the accepted edges; while the worst of them that is not a bridge has a chi2
-        over the threshold, reject it and solve again (from the last poses). In batch mode,
-        each round rejects every edge over the threshold that is the worst near it."""
+    def agree(self) -> Solution:
+        """Solve all links, then, while a kept link that lies on a cycle fails the chi-square
+        test in the Huber or the Cauchy solution, give up the one whose removal leaves the
+        least disagreement (among the :data:`LOOKAHEAD` worst, a gate-ok link's chi-square
+        counted :data:`TRUST` times smaller) and solve again; returns the last solution."""
+        self.kept = set(range(len(self.edges)))
+        sol = self._solve(_trusted_first(self.solver))
         while True:
-            ids = sorted(self.accepted)
-            sol = self.solver.solve(ids, guess, every_component=True)
-            self.last = residuals(self.edges, ids, sol.poses, self.solver.sqrt_info)
-            free = bridges(self.solver.n, self.edges, ids)
-            over = [k for k in ids if k not in free and self.last[k].chi2 > self.threshold]
+            over = self._over()
             if not over:
                 return sol
-            worst_first = sorted(over, key=lambda k: -self.last[k].chi2)
-            picked = self._local_worst(worst_first) if self.batch else worst_first[:1]
-            for k in picked:
-                self.accepted.discard(k)
-                self.tested.pop(k, None)
-                self.rejected[k] = (
-                    f"chi2 {self.last[k].chi2:.4g} > {self.threshold:.2f}, the worst "
-                    f"{'near it ' if self.batch else ''}of {len(over)} link(s) over the "
-                    f"threshold (solve {self.solver.solves})"
-                )
-            guess = sol.poses
-
-    def _local_worst(self, worst_first: list[int]) -> list[int]:
-        """Batch mode: the edges of ``worst_first`` (over the threshold, worst first) with no
-        worse one touching their nodes or their nodes' neighbours (an outlier pulls its
-        neighbours over the threshold; they wait for the next solve), kept only while their
-        removal, with the ones before them, cuts no node off."""
-        edges, near = self.edges, [set() for _ in range(self.solver.n)]
-        for k in self.accepted:
-            near[edges[k].target].add(edges[k].source)
-            near[edges[k].source].add(edges[k].target)
-        picked: list[int] = []
-        blocked: set[int] = set()  # nodes near an edge already considered
-        for k in worst_first:
-            ends = {edges[k].target, edges[k].source}
-            if ends & blocked:
-                continue
-            zone = ends.union(*(near[v] for v in ends))
-            blocked |= zone
-            rest = [m for m in self.accepted if m != k and m not in picked]
-            labels = components(self.solver.n, [(edges[m].target, edges[m].source) for m in rest])
-            if labels[edges[k].target] == labels[edges[k].source]:
-                picked.append(k)
-        return picked
-
-    def test_untrusted(self, sol: Solution) -> bool:
-        """Test every untrusted edge whose nodes the solution poses together (same component)
-        against it: chi2 of its misfit under its covariance plus that of the adjusted relative
-        pose. Consistent ones join the accepted edges; returns whether any did."""
-        todo = [k for k, e in enumerate(self.edges) if not e.trusted and k not in self.rejected]
-        todo = [k for k in todo if k not in self.accepted and self._together(sol, k)]
-        if not todo:
-            return False
-        t0 = time.perf_counter()
-        marginals = self.solver.marginals(sol)
-        for k in todo:
-            e = self.edges[k]
-            Pi, Pj = sol.poses[e.target], sol.poses[e.source]
-            joint = self.solver.joint(marginals, e.target, e.source)
-            predicted = e.covariance + relative_covariance(Pi, Pj, joint)
-            xi = se3_log(np.linalg.inv(e.T_target_source) @ np.linalg.inv(Pi) @ Pj)[0]
-            chi2 = float(xi @ np.linalg.solve(predicted, xi))
-            ok = chi2 <= self.threshold
-            text = (
-                f"untrusted, tested against the adjustment of the other links: chi2 "
-                f"{chi2:.4g} {'<=' if ok else '>'} {self.threshold:.2f}"
+            trials = {}
+            for k in sorted(over, key=self._rank, reverse=True)[:LOOKAHEAD]:
+                self.kept.discard(k)
+                trials[k] = self._cost(self._trial(sol.poses), k)
+                self.kept.add(k)
+            worst = min(trials, key=lambda k: (trials[k], -self._rank(k)))
+            self.kept.discard(worst)
+            self.rejected[worst] = (
+                f"chi2 {self._chi2(worst):.4g} > {self.threshold:.2f}: of the {len(over)} "
+                f"link(s) over the threshold, the one whose removal leaves the least disagreement"
             )
-            if ok:
-                self.accepted.add(k)
-                self.tested[k] = text
-            else:
-                self.rejected[k] = text
-        self.test_s = time.perf_counter() - t0
-        return any(k in self.accepted for k in todo)
+            sol = self._solve(sol.poses)
 
-    def _together(self, sol: Solution, k: int) -> bool:
-        i, j = self.edges[k].target, self.edges[k].source
-        both = sol.poses[i] is not None and sol.poses[j] is not None
-        return both and sol.labels[i] == sol.labels[j]
+    def _solve(self, guess: Sequence[np.ndarray | None]) -> Solution:
+        """Solve the kept edges (every component) with both kernels and record their
+        residuals; returns the Huber solution."""
+        ids = sorted(self.kept)
+        redescending = self.solver.solve(ids, guess, every_component=True)
+        self.last = residuals(self.edges, ids, redescending.poses, self.solver.sqrt_info)
+        sol = self.trial.solve(ids, redescending.poses, every_component=True)
+        self.convex = residuals(self.edges, ids, sol.poses, self.solver.sqrt_info)
+        return sol
 
-    def states(self) -> list[tuple[EdgeState, str]]:
+    def _chi2(self, k: int) -> float:
+        """Link ``k``'s chi-square: the larger of the two solutions'."""
+        return max(self.last[k].chi2, self.convex[k].chi2)
+
+    def _trial(self, guess: Sequence[np.ndarray | None]) -> dict[int, EdgeResidual]:
+        """Residuals of the kept edges solved with the convex (Huber) kernel: what a removal
+        leaves, whatever pose the redescending kernel was caught in."""
+        ids = sorted(self.kept)
+        sol = self.trial.solve(ids, guess, every_component=True)
+        return residuals(self.edges, ids, sol.poses, self.solver.sqrt_info)
+
+    def _over(self) -> list[int]:
+        """Kept edges on a cycle of kept edges whose chi-square exceeds the threshold."""
+        ids = sorted(self.kept)
+        free = bridges(self.solver.n, self.edges, ids)
+        return [k for k in ids if k not in free and self._chi2(k) > self.threshold]
+
+    def _cost(self, found: dict[int, EdgeResidual], removed: int) -> float:
+        """Truncated least squares of the edges kept with ``removed`` given up: each edge's
+        chi-square, at most the threshold (a gate-ok edge's given up costs :data:`TRUST`)."""
+        cost = sum(min(r.chi2, self.threshold) for k, r in found.items() if k != removed)
+        return cost + self.threshold * (TRUST if self.edges[removed].trusted else 1.0)
+
+    def _rank(self, k: int) -> float:
+        """How strongly link ``k`` is to be given up: its chi-square, a gate-ok link's divided
+        by :data:`TRUST`."""
+        return self._chi2(k) / (TRUST if self.edges[k].trusted else 1.0)
+
+    def drop_untrusted_bridges(self) -> set[int]:
+        """Kept bridges whose own gate failed leave the kept set (they cannot be checked);
+        returns them."""
+        free = bridges(self.solver.n, self.edges, sorted(self.kept))
+        weak = {k for k in free if not self.edges[k].trusted}
+        self.kept -= weak
+        return weak
+
+    def states(self, unchecked: set[int]) -> list[tuple[EdgeState, str]]:
         """Final state and reason of every edge."""
-        free = bridges(self.solver.n, self.edges, sorted(self.accepted))
+        free = bridges(self.solver.n, self.edges, sorted(self.kept))
         out = []
         for k in range(len(self.edges)):
             if k in self.rejected:
                 out.append((EdgeState.REJECTED, self.rejected[k]))
-            elif k in self.tested:
-                out.append((EdgeState.CONFIRMED, self.tested[k]))
+            elif k in unchecked:
+                text = "a bridge (on no cycle of kept links) whose own gate failed: not checkable"
+                out.append((EdgeState.UNUSED, text))
             elif k in free and k in self.born_bridges:
-                out.append((EdgeState.USED, "a bridge: no cycle of kept links, not checkable"))
+                out.append((EdgeState.USED, "a bridge (on no cycle of links): its gate's word"))
             elif k in free:
-                text = "a bridge once its cycles lost rejected links: which was wrong is ambiguous"
-                out.append((EdgeState.USED, text))
-            elif k in self.accepted:
-                chi2 = self.last[k].chi2
+                text = "a bridge once links of its cycles were rejected: which was wrong is "
+                out.append((EdgeState.USED, text + "ambiguous; its gate's word"))
+            else:
+                chi2 = self.last[k].chi2 if k in self.last else float("nan")
                 text = f"on a cycle of kept links, chi2 {chi2:.4g} <= {self.threshold:.2f}"
                 out.append((EdgeState.CONFIRMED, text))
-            else:
-                text = "untrusted and not testable: no kept links pose its nodes together"
-                out.append((EdgeState.UNUSED, text))
         return out
 
 
+def _clusters(n: int, edges: Sequence[Edge], kept: Sequence[int], anchor: int) -> list[int | None]:
+    """Cluster of every node: components of the kept edges (the anchor's is 0, then by size,
+    ties by lowest node); a node on no kept edge is in none (except the anchor)."""
+    labels = components(n, [(edges[k].target, edges[k].source) for k in kept])
+    touched = {edges[k].target for k in kept} | {edges[k].source for k in kept} | {anchor}
+    groups: dict[int, list[int]] = {}
+    for v in sorted(touched):
+        groups.setdefault(int(labels[v]), []).append(v)
+    order = sorted(groups, key=lambda c: (c != labels[anchor], -len(groups[c]), groups[c][0]))
+    number = {c: k for k, c in enumerate(order)}
+    return [number[int(labels[v])] if v in touched else None for v in range(n)]
+
+
+def _roots(clusters: Sequence[int | None], anchor: int) -> dict[int, int]:
+    """Each cluster's root: the anchor for cluster 0, the lowest node for the others."""
+    roots = {0: anchor} if clusters[anchor] == 0 else {}
+    for v, c in enumerate(clusters):
+        if c is not None:
+            roots.setdefault(c, v)
+    return roots
+
+
+def _rooted(
+    adjustment: Adjustment, clusters: Sequence[int | None], roots: dict[int, int]
+) -> Adjustment:
+    """The adjustment with every cluster's poses in the frame of its root (cluster 0 stays in
+    the anchor's; covariances, in the nodes' body frames, do not change)."""
+    poses = list(adjustment.poses)
+    for v, c in enumerate(clusters):
+        if c is not None and c != 0 and poses[v] is not None:
+            poses[v] = np.linalg.inv(adjustment.poses[roots[c]]) @ adjustment.poses[v]
+    return replace(adjustment, poses=tuple(poses))
+
+
+def _pinned(pose: np.ndarray, cov: np.ndarray | None) -> str:
+    """'' when the node's horizontal position and heading are known within the bounds, else
+    why not (a 6x6 covariance, right perturbation in the node's body frame)."""
+    if cov is None:
+        return ""
+    R = pose[:3, :3]
+    pos = R @ cov[3:, 3:] @ R.T
+    w, V = np.linalg.eigh(pos[:2, :2])
+    heading = float(np.degrees(np.sqrt(max((R @ cov[:3, :3] @ R.T)[2, 2], 0.0))))
+    if np.sqrt(max(w[1], 0.0)) > MAX_SIGMA_M:
+        d = V[:, 1]
+        return (
+            f"position along ({d[0]:.2f}, {d[1]:.2f}) not pinned down by its links "
+            f"(sigma {np.sqrt(w[1]):.3g} m > {MAX_SIGMA_M} m)"
+        )
+    if heading > MAX_SIGMA_DEG:
+        return f"heading not pinned down by its links (sigma {heading:.3g} deg > {MAX_SIGMA_DEG})"
+    return ""
+
+
 def _node_verdicts(
-    edges: Sequence[Edge], states: Sequence[EdgeState], adjustment: Adjustment
+    edges: Sequence[Edge],
+    states: Sequence[EdgeState],
+    adjustment: Adjustment,
+    clusters: Sequence[int | None],
 ) -> tuple[NodeVerdict, ...]:
-    """Ok: posed by the adjustment. Suspect: reached from an ok node breadth-first through
-    kept and unused edges (posed by composing them; ``via``: the first unused edge on the
-    path). Unposed: the rest; the reason names the rejected links when only those touch it.
-    (:func:`verify` never rejects a bridge, so rejections alone cannot cut a node off.)"""
-    ok = {v: p for v, p in enumerate(adjustment.poses) if p is not None}
+    """Ok: posed by the adjustment and pinned down. Suspect: posed but not pinned down, or
+    reached from a posed node breadth-first through kept and unused edges (posed by composing
+    them; ``via``: the first unused edge on the path). Unposed: the rest."""
+    posed = {v: p for v, p in enumerate(adjustment.poses) if p is not None}
     unused = [k for k, s in enumerate(states) if s is EdgeState.UNUSED]
     kept = [k for k, s in enumerate(states) if s in (EdgeState.CONFIRMED, EdgeState.USED)]
-    posed, via = compose(edges, kept + unused, ok, set(unused))
+    reached, via = compose(edges, kept + unused, posed, set(unused))
+    cluster = list(clusters)
+    for v in reached:  # a node reached through unused links belongs to where it was reached from
+        if cluster[v] is None and via[v] is not None:
+            e = edges[via[v]]
+            cluster[v] = cluster[e.target] if cluster[e.target] is not None else cluster[e.source]
     out = []
     for v in range(len(adjustment.poses)):
-        if v in ok:
-            out.append(NodeVerdict(v, NodeStatus.OK, ok[v], adjustment.covariances[v], "adjusted"))
-        elif v in posed:
+        cov = adjustment.covariances[v]
+        if v in posed:
+            why = _pinned(posed[v], cov)
+            status = NodeStatus.SUSPECT if why else NodeStatus.OK
+            out.append(NodeVerdict(v, status, posed[v], cov, why or "adjusted", None, cluster[v]))
+        elif v in reached:
             e = edges[via[v]]
             text = f"posed only through unused link {via[v]} (T_{e.target}_{e.source})"
-            out.append(NodeVerdict(v, NodeStatus.SUSPECT, posed[v], None, text, via[v]))
+            out.append(
+                NodeVerdict(v, NodeStatus.SUSPECT, reached[v], None, text, via[v], cluster[v])
+            )
         else:
-            out.append(NodeVerdict(v, NodeStatus.UNPOSED, None, None, _unposed(edges, states, v)))
+            why = _unposed(edges, states, v)
+            out.append(NodeVerdict(v, NodeStatus.UNPOSED, None, None, why))
     return tuple(out)
 
 
@@ -281,7 +387,7 @@ def _unposed(edges: Sequence[Edge], states: Sequence[EdgeState], v: int) -> str:
         return "no link"
     if all(states[k] is EdgeState.REJECTED for k in touching):
         return "only rejected links: " + ", ".join(map(str, touching))
-    return "no kept or unused link connects it to the anchor"
+    return "no kept link ties it to another scan"
 
 
 def verify(
@@ -291,55 +397,50 @@ def verify(
     initial_poses: Sequence[np.ndarray | None] | None = None,
     *,
     threshold: float = CHI2_6_999,
-    kernel: str = "huber",
-    kernel_width: float | None = None,
     max_iterations: int = 100,
-    batch: bool = False,
 ) -> Verification:
-    """Decide which links to keep by their consistency, adjust, and judge every node.
+    """Decide which links to keep by their agreement and their gates, adjust every cluster,
+    and judge every node (see the module docstring).
 
-    1. The accepted edges start as the trusted ones. Solve (each connected component of them;
-       the anchor's in the world frame); while the worst accepted edge that is not a bridge
-       has ``chi2 > threshold``, reject it and solve again: one at a time, worst first.
-       Bridges (no cycle of accepted edges) cannot be checked and stay accepted.
-    2. Each untrusted edge whose nodes that solution poses together is tested against it:
-       chi2 of its misfit under its covariance plus the adjusted relative pose's. Consistent
-       ones are accepted (then step 1 runs again, so the kept set stays consistent);
-       inconsistent ones are rejected; the rest are unused.
-    3. Edge states: ``rejected``; ``confirmed`` (accepted on a cycle within the threshold, or
-       untrusted and consistent); ``used`` (accepted bridges); ``unused``. Node statuses: ok
-       (connected to the anchor through accepted edges: the final adjustment), suspect
-       (reached only through unused edges: composed from the nearest ok node, ``via`` the
-       unused edge), unposed (only rejected edges reach it, or none). Residuals are against
-       the final poses (ok and suspect nodes).
-
-    ``threshold``: chi-square of the whitened 6-DOF misfit (default p = 0.999); the robust
-    kernel's width defaults to its square root. Options as :func:`adjust`. ``batch``: step 1
-    rejects, per solve, every edge over the threshold with no worse one within one link of
-    its nodes (and whose removal with the others cuts no node off): one solve per round
-    instead of one per outlier, the same choices where outliers lie apart; for networks with
-    many bad links.
+    ``threshold``: chi-square of a link's whitened 6-DOF misfit (default p = 0.999), both the
+    consensus's inlier bound and the safety net's test; the final adjustment uses a Huber
+    kernel of width its square root. ``initial_poses``: optional ``T_world_node`` guesses
+    (None entries: composed through the links, gate-ok ones first). Poses are in each
+    cluster's frame: the anchor's for cluster 0, the lowest node's for the others.
     """
     t0 = time.perf_counter()
-    width = float(np.sqrt(threshold)) if kernel_width is None else kernel_width
-    solver = Solver(n_nodes, anchor, edges, initial_poses, kernel, width, max_iterations)
-    run = _Verifier(solver, threshold, batch)
-    sol = run.reject_until_consistent(solver.guess)
-    if run.test_untrusted(sol):
-        sol = run.reject_until_consistent(sol.poses)
-    adjustment = adjustment_of(solver, sol, True, t0)
-    states = run.states()
-    nodes = _node_verdicts(edges, [s for s, _ in states], adjustment)
+    width = float(np.sqrt(threshold))
+    detect = Solver(n_nodes, anchor, edges, initial_poses, "cauchy", width, max_iterations)
+    solver = Solver(n_nodes, anchor, edges, initial_poses, "huber", width, max_iterations)
+    run = _Verifier(detect, solver, threshold)
+    found = run.agree()
+    unchecked = run.drop_untrusted_bridges()
+    sol = solver.solve(sorted(run.kept), found.poses, every_component=True)
+    adjustment = adjustment_of(solver, sol, True, t0, every_component=True)
+    states = run.states(unchecked)
+    clusters = _clusters(n_nodes, edges, sorted(run.kept), anchor)
+    roots = _roots(clusters, anchor)
+    adjustment = _rooted(adjustment, clusters, roots)
+    nodes = _node_verdicts(edges, [s for s, _ in states], adjustment, clusters)
     found = residuals(edges, range(len(edges)), [n.pose for n in nodes], solver.sqrt_info)
+    same = {k for k, e in enumerate(edges) if nodes[e.target].cluster == nodes[e.source].cluster}
     verdicts = tuple(
-        EdgeVerdict(k, e.target, e.source, e.trusted, state, reason, found.get(k))
+        EdgeVerdict(
+            k, e.target, e.source, e.trusted, state, reason, found.get(k) if k in same else None
+        )
         for k, (e, (state, reason)) in enumerate(zip(edges, states, strict=True))
     )
     timings = {
-        "solve_s": solver.solve_s,
-        "test_s": run.test_s,
+        "solve_s": detect.solve_s + solver.solve_s,
         "marginals_s": adjustment.marginals_s,
     }
     return Verification(
-        verdicts, nodes, adjustment, threshold, solver.solves, time.perf_counter() - t0, timings
+        verdicts,
+        nodes,
+        adjustment,
+        threshold,
+        detect.solves + solver.solves,
+        time.perf_counter() - t0,
+        timings,
+        roots,
     )

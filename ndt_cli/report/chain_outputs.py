@@ -17,6 +17,8 @@ from ndt_cli.io.serialize import csv_text, to_json
 from ndt_cli.ndt.result import Status
 from ndt_cli.pipeline.chain import ChainResult
 from ndt_cli.pipeline.scans import file_stem, link_file_name
+from ndt_cli.pipeline.solution import ScanPose
+from ndt_cli.pipeline.verify import NodeStatus
 from ndt_cli.report.html_report import chain_report
 from ndt_cli.report.tables import PAIR_COLUMNS, POSE_COLUMNS, pair_row, pose_row
 from ndt_cli.report.topview import topview_png
@@ -52,6 +54,7 @@ def summary(result: ChainResult, runtime_s: float) -> dict[str, Any]:
                 if f.state.value == "rejected"
             ],
             "scans_by_status": _count(s.value for s in scans),
+            "clusters": _count(str(s.cluster) for s in sol.scans if s.cluster is not None),
             "scans_not_ok": {
                 result.names[k]: f"{s.status.value}: {s.reason}"
                 for k, s in enumerate(sol.scans)
@@ -80,14 +83,21 @@ def _pose_lines(names: Any, poses: Any, what: str, anchor: str) -> list[str]:
 def poses_text(result: ChainResult) -> str:
     """``poses.txt``: T_world_scan of every ok scan; the others as comments with the reason."""
     sol = result.solution
-    ok = [s.T_world_scan if s.status.value == "ok" else None for s in sol.scans]
+    ok = [s.T_world_scan if s.anchored else None for s in sol.scans]
     lines = _pose_lines(result.names, ok, "T_world_scan per scan", result.names[result.anchor])
     lines += [
-        f"# {name}: {s.status.value}: {s.reason}"
+        f"# {name}: {_why_not(s)}"
         for name, s in zip(result.names, sol.scans, strict=True)
-        if s.status.value != "ok"
+        if not s.anchored
     ]
     return "\n".join(lines) + "\n"
+
+
+def _why_not(scan: ScanPose) -> str:
+    """Why a scan is not in poses.txt."""
+    if scan.status is NodeStatus.OK:
+        return f"ok in cluster {scan.cluster} (its own frame): no link ties it to the anchor"
+    return f"{scan.status.value}: {scan.reason}"
 
 
 def chained_text(result: ChainResult) -> str:
@@ -104,7 +114,7 @@ def pose_files(result: ChainResult) -> dict[str, str]:
     return {
         f"poses/T_world_{file_stem(name)}.txt": format_matrix(s.T_world_scan)
         for name, s in zip(result.names, result.solution.scans, strict=True)
-        if s.status.value == "ok"
+        if s.anchored
     }
 
 
@@ -123,12 +133,23 @@ def _header_poses_text(result: ChainResult) -> str | None:
     return "\n".join(lines) + "\n"
 
 
+def _levels(result: ChainResult) -> dict[int, np.ndarray]:
+    """Each scan's levelling rotation, from any link that prepared it."""
+    out: dict[int, np.ndarray] = {}
+    for link in result.links:
+        if link.result is not None:
+            out[link.target] = link.result.level_target
+            out[link.source] = link.result.level_source
+    return out
+
+
 def chain_files(result: ChainResult, cfg: Config, runtime_s: float) -> dict[str, str]:
     """Every text output of a chain, by file name."""
     names, sol = result.names, result.solution
     pairs = [pair_row(k, names, f) for k, f in zip(result.links, sol.links, strict=True)]
+    level = _levels(result)
     poses = [
-        pose_row(k, n, s.T_world_scan, s)
+        pose_row(k, n, s.T_world_scan, s, level.get(k))
         for k, (n, s) in enumerate(zip(names, sol.scans, strict=True))
     ]
     files = {

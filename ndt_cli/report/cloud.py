@@ -51,6 +51,8 @@ def _chain_scans(folder: Path) -> tuple[list[ResultScan], int]:
         T = np.array([float(row[f"m{r}{c}"]) for r in range(4) for c in range(4)]).reshape(4, 4)
         status = row.get("status") or ("ok" if has else "unposed")
         reason = row.get("reason", "")
+        if row.get("cluster") not in (None, "", "0"):  # posed in its own cluster's frame
+            status, reason = "other cluster", f"cluster {row['cluster']}: not tied to the anchor"
         scans.append(ResultScan(row["file"], _file(f), status, T if has else None, reason))
     return scans, anchor
 
