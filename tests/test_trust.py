@@ -1,0 +1,93 @@
+"""The reduced tier of the trust sweep (``benchmarks/trust_sweep.py``): streets unlike the one
+the defaults were first tuned on (grades, vertical curves, camber and cross-fall, tilted and
+compensated scanners, people, traffic, trees, a bend), chained with the defaults and judged
+against ground truth (:mod:`ndt_cli.analysis.trust`)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ndt_cli import io, sim
+from ndt_cli.analysis import trust
+from ndt_cli.config import Config
+from ndt_cli.ndt.result import Status
+from ndt_cli.pipeline.chain import run_chain
+from ndt_cli.pipeline.verify import NodeStatus
+
+pytestmark = pytest.mark.slow
+
+STREETS = [
+    sim.StreetWorld(seed=31, grade=0.05, curve=0.0003, camber=0.025, tilt_deg=0.8),
+    sim.StreetWorld(
+        seed=32, grade=-0.06, camber=0.03, tilt_deg=0.6, people=15, traffic=1, trees=True
+    ),
+    sim.StreetWorld(seed=33, grade=0.03, cross_fall=0.02, compensated=True, bend_deg=20),
+]
+
+
+def _chained(world: sim.StreetWorld, folder):
+    _, scans, truth = sim.scan_street(world)
+    files = []
+    for k, pts in enumerate(scans):
+        files.append(folder / f"scan_{k:02d}.laz")
+        io.write(files[-1], pts)
+    return run_chain(files, Config(), folder / "out", jobs=2), truth
+
+
+@pytest.fixture(scope="module")
+def streets(tmp_path_factory):
+    out = []
+    for world in STREETS:
+        folder = tmp_path_factory.mktemp(f"street{world.seed}")
+        result, truth = _chained(world, folder)
+        out.append(
+            (world, result, trust.link_truths(result, truth), trust.scan_truths(result, truth))
+        )
+    return out
+
+
+def test_every_scan_of_a_clean_street_is_ok_and_right(streets):
+    for world, result, _, scans in streets:
+        assert result.ok, world.describe()
+        assert all(s.status is NodeStatus.OK and s.cluster == 0 for s in scans)
+        worst = max(s.trans_m for s in scans), max(s.rot_deg for s in scans)
+        assert worst[0] < trust.CORRECT[1] and worst[1] < trust.CORRECT[0], world.describe()
+
+
+def test_no_link_is_wrong_and_ok_and_the_gate_lets_the_right_ones_through(streets):
+    links = [x for _, _, found, _ in streets for x in found]
+    assert not [x for x in links if not x.correct and x.status is Status.OK]
+    right = [x for x in links if x.correct]
+    false_alarms = [x for x in right if x.status is not Status.OK]
+    assert len(right) >= 30
+    assert len(false_alarms) <= 0.03 * len(right), false_alarms
+
+
+def test_each_scan_is_levelled_to_the_vertical_not_to_its_sloping_ground(streets):
+    errors = [s.vertical_deg for _, _, _, scans in streets for s in scans]
+    assert max(errors) < 0.03, errors  # the ground's normal is 1.1-3.5 degrees off here
+
+
+def test_the_slices_alone_are_near_the_truth_before_icp(streets):
+    right = [x for _, _, links, _ in streets for x in links if x.correct]
+    assert max(x.ndt_rot_deg for x in right) < 0.05
+    assert np.median([x.ndt_trans_m for x in right]) < 0.02
+
+
+def test_a_scan_of_another_street_in_the_middle_is_never_ok(tmp_path):
+    world = sim.StreetWorld(seed=41, grade=0.04, camber=0.025, tilt_deg=0.5)
+    _, scans, truth = sim.scan_street(world)
+    _, other, _ = sim.scan_street(sim.StreetWorld(seed=541, n_scans=1, grade=-0.03))
+    mid = len(scans) // 2
+    scans[mid] = other[0]
+    files = []
+    for k, pts in enumerate(scans):
+        files.append(tmp_path / f"scan_{k:02d}.laz")
+        io.write(files[-1], pts)
+    result = run_chain(files, Config(), tmp_path / "out", jobs=2)
+    found = trust.scan_truths(result, truth)
+    assert found[mid].status is not NodeStatus.OK or found[mid].cluster != 0
+    ok = [s for s in found if s.status is NodeStatus.OK and s.index != mid]
+    assert ok and all(s.correct for s in ok)  # right in their clusters' frames
+    assert not result.ok
