@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 # the runtime dependencies only: where make bench times the commands as fresh processes
 RUN_VENV := .venv-run
 
-.PHONY: demo test test-fast bench lint sample-data clean
+.PHONY: demo test test-fast bench trust lint sample-data clean
 
 $(STAMP): pyproject.toml
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "$(PYTHON) not found (set PYTHON=...)"; exit 2; }
@@ -42,6 +42,10 @@ $(RUN_VENV)/.installed: pyproject.toml
 
 bench: $(VENV)/.bench $(RUN_VENV)/.installed
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python benchmarks/run.py $(BENCH_ARGS)
+
+# the trust sweep: every check's false alarms and misses on varied streets and real data
+trust: $(STAMP)
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python benchmarks/trust_sweep.py $(TRUST_ARGS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check ndt_cli tests tools benchmarks

@@ -146,13 +146,15 @@ class Sights:
 
 @dataclass(frozen=True)
 class Verdict:
-    """Status, warnings (what made it not ok), notes (what was checked and did not) and the
-    weakly constrained direction (levelled target frame) if any."""
+    """Status, warnings (what made it not ok), notes (what was checked and did not), the
+    weakly constrained direction (levelled target frame) if any, and whether the pose is
+    refuted, not merely doubted."""
 
     status: Status
     warnings: tuple[str, ...]
     weak_direction: np.ndarray | None
     notes: tuple[str, ...] = ()
+    refuted: bool = False  # the pose contradicts the data: see :func:`judge`
 
 
 def judge(
@@ -163,13 +165,18 @@ def judge(
     q: QualityConfig,
     sights: Sights = Sights(),
 ) -> Verdict:
-    """The verdict on a registration, in the order of precedence of the module docstring."""
+    """The verdict on a registration, in the order of precedence of the module docstring. A
+    pose is *refuted*, not merely doubted, when it puts more than ``quality.max_free_space`` of
+    the points into space a scanner saw empty, or when ICP moved it further than it may: the
+    data contradict it, so no agreement with other links can confirm it (two links slid by
+    the same period of a street's facades agree with each other)."""
     plausible = not np.isfinite(sights.second) or sights.second <= q.max_free_space
     blind = not np.isfinite(sights.final)
     warnings, notes, weak = ndt_warnings(fit, q, refined.icp is not None, plausible, blind)
     more, weak_icp = icp_warnings(refined, level, q)
     warnings += more
-    if np.isfinite(sights.final) and sights.final > q.max_free_space:
+    contradicts = np.isfinite(sights.final) and sights.final > q.max_free_space
+    if contradicts:
         warnings.append(
             f"free space: the pose puts {sights.final:.0%} of the points into space the other "
             f"scanner saw empty (> {q.max_free_space:.0%})"
@@ -184,4 +191,5 @@ def judge(
         status = Status.DEGENERATE
     else:
         status = Status.SUSPECT if warnings else Status.OK
-    return Verdict(status, tuple(warnings), weak, tuple(notes))
+    refuted = bool(contradicts or refined.rejected)
+    return Verdict(status, tuple(warnings), weak, tuple(notes), refuted)

@@ -294,6 +294,7 @@ def _result(
         free_space_second=s.sights.second,
         score_per_point_final=s.score_final,
         notes=s.verdict.notes,
+        refuted=s.verdict.refuted,
     )
 
 

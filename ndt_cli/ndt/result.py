@@ -120,6 +120,7 @@ class RegistrationResult:
     score_per_point_final: float = float("nan")
     free_space_second: float = float("nan")  # that of the second-best pose
     notes: tuple[str, ...] = field(default=())  # what the gate checked and let pass
+    refuted: bool = False  # the data contradict the pose (ndt_cli.ndt.quality.judge)
 
     def __repr__(self) -> str:
         rot = f"yaw {self.yaw_deg:.4f} deg"
@@ -223,6 +224,7 @@ class RegistrationResult:
             "free_space_second": self.free_space_second,
             "score_per_point_final": self.score_per_point_final,
             "notes": list(self.notes),
+            "refuted": self.refuted,
         }
 
     @classmethod

@@ -29,6 +29,7 @@ from ndt_cli.pipeline.network import LinkKind
 from ndt_cli.pipeline.verify import EdgeState, NodeStatus, NodeVerdict, verify
 
 USABLE = (Status.OK, Status.SUSPECT, Status.DEGENERATE)  # links whose transform can be tested
+# (unless the data refute it: ndt_cli.ndt.quality.judge)
 
 
 @dataclass(frozen=True)
@@ -165,7 +166,7 @@ def _adjusted(
     plain: tuple[np.ndarray | None, ...],
 ) -> NetworkSolution:
     """Verify and adjust the network of usable links; map nodes and edges back."""
-    used = [k for k, link in enumerate(links) if link.status in USABLE]
+    used = [k for k, link in enumerate(links) if link.status in USABLE and not link.result.refuted]
     red = reductions(n_scans, links)
     edges = [
         Edge(
@@ -179,10 +180,17 @@ def _adjusted(
     ]
     v = verify(n_scans, anchor, edges)
     scans = tuple(_scan_pose(node, red, v.roots, unreadable, links) for node in v.nodes)
-    fits = [LinkFit(EdgeState.UNUSED, reason=k.reason or k.status.value) for k in links]
+    fits = [LinkFit(EdgeState.UNUSED, reason=_left_out(k)) for k in links]
     for verdict, k in zip(v.edges, used, strict=True):
         fits[k] = LinkFit(verdict.state, verdict.residual, verdict.reason)
     return NetworkSolution(scans, tuple(fits), plain, adjusted=True, timings=dict(v.timings))
+
+
+def _left_out(link: Link) -> str:
+    """Why a link is not in the network."""
+    if link.result is not None and link.result.refuted:
+        return "refuted by its data, left out: " + link.reason
+    return link.reason or link.status.value
 
 
 def _scan_pose(
