@@ -1,6 +1,7 @@
 """Benchmarks of ndt-cli, printed as one report: command start-up and import time, a pair end to
 end against a bare read of its files, the stages of a pair, peer tools on the same pairs, the
-network of six scans, the adjustment of a 1,000-scan network, the export, the NDT kernel's
+network of six scans, the adjustment of a 1,000-scan network, campaigns of 16, 64 and 256
+scans (in a walk and shuffled) and field mode's latency, the export, the NDT kernel's
 throughput and reading at scale; then every figure against its target.
 
 Run with ``make bench``; ``--quick`` skips the slow parts (the 32 M / 50 M point files, the
@@ -25,7 +26,7 @@ sys.path.insert(0, str(ROOT))
 import numpy as np  # noqa: E402
 
 import ndt_cli  # noqa: E402
-from benchmarks import data, fresh, inprocess  # noqa: E402
+from benchmarks import campaign_bench, data, fresh, inprocess  # noqa: E402
 from benchmarks.common import (  # noqa: E402
     PY,
     RUN_BIN,
@@ -90,6 +91,7 @@ def main() -> int:
             inprocess.peers(p)
     fresh.network(pairs[0], files, poses_file, repeat=1 if args.quick else 2, jobs1=not args.quick)
     inprocess.adjustment()
+    campaign_bench.campaigns(args.quick)
     if not args.quick or args.export_50m:
         fresh.export(
             ([] if args.quick else [15_000_000]) + ([50_000_000] if args.export_50m else [])

@@ -15,5 +15,6 @@ from ndt_cli.cli.chain import chain_app
 from ndt_cli.cli.evaluate import eval_app
 from ndt_cli.cli.export import export_app
 from ndt_cli.cli.register import register_app
+from ndt_cli.cli.watch import watch_app
 
-__all__ = ["analyze_app", "chain_app", "eval_app", "export_app", "register_app"]
+__all__ = ["analyze_app", "chain_app", "eval_app", "export_app", "register_app", "watch_app"]

@@ -52,6 +52,23 @@ VerboseOpt = Annotated[
 ]
 DebugOpt = Annotated[bool, typer.Option("--debug", help="Show tracebacks of errors.")]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print the result as JSON on stdout.")]
+NeighboursOpt = Annotated[
+    int,
+    typer.Option(
+        "--neighbours", "-k", help="Nearest scans each scan is registered to (1: a chain)."
+    ),
+]
+RadiusOpt = Annotated[
+    float | None,
+    typer.Option(
+        help="Register no two scans farther apart than this (m).",
+        show_default="2.2 x the median distance between nearest scans",
+    ),
+]
+JobsOpt = Annotated[
+    int | None,
+    typer.Option("--jobs", "-j", help="Parallel processes.", show_default="all cores"),
+]
 ResultDirArg = Annotated[
     Path | None, typer.Argument(help="Output folder of ndt-chain or ndt-register.")
 ]

@@ -1,8 +1,11 @@
-"""Links of a chain: one registration of a scan pair, its identity, and its record on disk.
+"""Links of a campaign: one registration of a scan pair, its identity, and its record on disk.
 
-Every finished link is written at once to ``links/TTTT-SSSS.json`` (target and source scan
-indices; atomically) with the key of its inputs (both files' hashes, the config, and a loop
-closure's guess), so an interrupted chain resumes where it stopped.
+A link is known by the key of its inputs: both scans' contents (file hashes), which is the
+target, and the config. Every finished link is written at once to ``links/<key>.json``
+(atomically), so an interrupted campaign resumes where it stopped, and a campaign whose scans
+were renamed, reordered or joined by more scans finds every link it already registered. What
+the campaign needs of each scan without reading it again (its sketch for the overlap search
+and its preview for the top view) is kept there too, under the key of the scan.
 """
 
 from __future__ import annotations
@@ -17,23 +20,26 @@ import numpy as np
 
 from ndt_cli.io import atomic
 from ndt_cli.io.serialize import to_json
+from ndt_cli.ndt.bnb import ScoreField
+from ndt_cli.ndt.overlap import Sketch
 from ndt_cli.ndt.result import RegistrationResult, Status
 from ndt_cli.pipeline.network import LinkKind
 
 LINK_FOLDER = "links"
-_FORMAT = 2  # version of the link files: older ones are recomputed, not misread
+_FORMAT = 3  # version of the link files: older ones are recomputed, not misread
 
 
 def link_key(target_hash: str, source_hash: str, cfg_text: str) -> str:
-    """Identity of a link's inputs: both files' hashes and the config."""
+    """Identity of a link's inputs: both files' hashes (target first) and the config; with an
+    empty source hash, the identity of one scan prepared with the config."""
     text = f"{target_hash}\n{source_hash}\n{cfg_text}\nformat {_FORMAT}"
     return hashlib.sha256(text.encode()).hexdigest()
 
 
 @dataclass(frozen=True)
 class Link:
-    """One registration of the chain: scan ``source`` onto scan ``target`` (indices into the
-    scan list). ``result`` is None when the link failed before registering (``failure`` says
+    """One registration of the campaign: scan ``source`` onto scan ``target`` (indices into the
+    campaign's scans). ``result`` is None when the link failed before registering (``failure`` says
     why: an unreadable scan, a worker that died)."""
 
     index: int
@@ -94,38 +100,56 @@ class Link:
 
 
 class LinkStore:
-    """The ``links/`` folder of a chain's output: one JSON file per finished link."""
+    """The ``links/`` folder of a campaign's output: one JSON file per finished link, named by
+    its key, and one file per scan with its sketch and preview, named by the scan's key."""
 
     def __init__(self, out: Path) -> None:
         self.folder = Path(out) / LINK_FOLDER
 
-    def path(self, target: int, source: int) -> Path:
-        return self.folder / f"{target:04d}-{source:04d}.json"
+    def path(self, key: str) -> Path:
+        return self.folder / f"{key[:40]}.json"
 
     def clean_stale(self) -> None:
         """Remove temporary files left by a run that was killed while writing a link."""
         for stale in self.folder.glob(".*.tmp*"):
             stale.unlink(missing_ok=True)
 
-    def save(self, link: Link) -> None:
-        atomic.write_text(self.path(link.target, link.source), to_json(link.to_dict()))
+    def save(self, link: Link, names: tuple[str, str] = ("", "")) -> None:
+        """Keep a finished link (``names``: its target's and source's, for a reader)."""
+        record = {**link.to_dict(), "target_name": names[0], "source_name": names[1]}
+        atomic.write_text(self.path(link.key), to_json(record))
 
-    def save_preview(self, scan_key: str, points: np.ndarray) -> None:
-        """Keep a scan's preview points (for the top view of a resumed chain)."""
-        with atomic.atomic_path(self.folder / f"preview_{scan_key[:16]}.npy") as tmp:
-            np.save(tmp, points)
-
-    def load_preview(self, scan_key: str) -> np.ndarray | None:
+    def load(self, key: str) -> Link | None:
+        """The finished link whose inputs had this ``key``, else None."""
         try:
-            return np.load(self.folder / f"preview_{scan_key[:16]}.npy")
-        except (OSError, ValueError):
-            return None
-
-    def load(self, target: int, source: int, key: str) -> Link | None:
-        """The finished link of this pair if its inputs had this ``key``, else None."""
-        try:
-            text = self.path(target, source).read_text(encoding="utf-8")
-            link = Link.from_dict(json.loads(text))
+            link = Link.from_dict(json.loads(self.path(key).read_text(encoding="utf-8")))
         except (OSError, ValueError, TypeError, KeyError):
             return None
         return link if link.key == key else None
+
+    def save_scan(self, scan_key: str, preview: np.ndarray, sketch: Sketch) -> None:
+        """Keep what the campaign needs of a scan without reading it again."""
+        arrays = {f"slice_{k}": s for k, s in enumerate(sketch.slices)}
+        field = sketch.field
+        with atomic.atomic_open(self.folder / f"scan_{scan_key[:40]}.npz", "wb") as fh:
+            np.savez(
+                fh,
+                preview=preview,
+                field=field.values,
+                origin=field.origin,
+                resolution=np.float64(field.resolution),
+                centre=field.centre,
+                to_local=sketch.to_local,
+                **arrays,
+            )
+
+    def load_scan(self, scan_key: str) -> tuple[np.ndarray, Sketch] | None:
+        """A scan's preview and sketch, if kept."""
+        try:
+            with np.load(self.folder / f"scan_{scan_key[:40]}.npz") as z:
+                n = sum(name.startswith("slice_") for name in z.files)
+                slices = tuple(z[f"slice_{k}"] for k in range(n))
+                field = ScoreField(z["field"], z["origin"], float(z["resolution"]), z["centre"])
+                return z["preview"], Sketch(slices, field, z["to_local"])
+        except (OSError, ValueError, KeyError):
+            return None

@@ -1,16 +1,22 @@
-"""Which scan pairs a campaign registers: the network of links.
+"""Which scan pairs a campaign registers: the network of links, planned from where scans are.
 
-Each scan is linked to its ``neighbours`` predecessors in the scan order (``adjacent`` to the
-one before it, ``skip`` to those before that), to the pairs the user lists (``user``), and,
-after a first adjustment, to the scans that the network puts within the loop radius but that
-no link joins yet (``loop``: a street that comes back to its start, two passes of one place).
-Redundant links are what lets the adjustment check one link against the others.
+Once scans are placed (each group of connected scans in a frame of its own), the network links
+each scan to its ``neighbours`` nearest scans of its group within a radius, plus the shortest
+links that keep the group connected (a minimum spanning tree over the scanner positions, pairs
+known not to register left out), plus the user's pairs. The plan depends on where the scans
+are, not on the order they came in: a campaign given in any order, or one scan at a time, ends
+with the same links. Redundant links are what lets the adjustment check one against another.
+
+With one neighbour the campaign is the classic chain instead: each scan against the one before
+it in the order given (:func:`classic_chain`).
+
+Scans are indices into the campaign's list here (0, 1, ... in campaign order).
 """
 
 from __future__ import annotations
 
 import csv
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
@@ -19,16 +25,15 @@ import numpy as np
 
 from ndt_cli.errors import InputError, read_user_text
 
-LOOP_RADIUS_FACTOR = 2.0  # default loop radius: this times the median adjacent link length
-MAX_LOOPS_PER_SCAN = 2  # loop candidates per scan, nearest first
+RADIUS_FACTOR = 2.2  # default radius: this times the median distance of a scan to its nearest
+Pair = tuple[int, int]  # an unordered pair of scans, lower index first
 
 
 class LinkKind(StrEnum):
     """Why a pair of scans is registered."""
 
-    ADJACENT = "adjacent"  # a scan and the one before it
-    SKIP = "skip"  # a scan and one two or more before it
-    LOOP = "loop"  # close according to the network, registered with its pose as a guess too
+    ADJACENT = "adjacent"  # consecutive in the campaign's order (the walk, when there is one)
+    FOUND = "found"  # found by where the scans are, whatever their order
     USER = "user"  # listed by the user (--pairs)
 
 
@@ -40,28 +45,97 @@ class PlannedLink:
     source: int
     kind: LinkKind
 
+    @property
+    def pair(self) -> Pair:
+        return pair_of(self.target, self.source)
 
-def plan_sequence(
-    n_scans: int, neighbours: int, unreadable: Iterable[int] = ()
-) -> list[PlannedLink]:
-    """Each scan against its ``neighbours`` nearest readable predecessors.
 
-    A scan that cannot be read gets one (failing) link from the readable scan before it, so
-    that the outputs say why it has no pose; readable scans skip over it, so that they keep
-    ``neighbours`` links (with one neighbour: the old chain, scan i against the last readable
-    scan before it).
-    """
+def pair_of(a: int, b: int) -> Pair:
+    return (min(a, b), max(a, b))
+
+
+def classic_chain(n_scans: int, unreadable: Iterable[int] = ()) -> list[PlannedLink]:
+    """Each scan against the last readable scan before it (a scan that cannot be read gets one
+    failing link from the scan before it, so that the outputs say why it has no pose)."""
     bad = set(unreadable)
     links = []
     for j in range(1, n_scans):
         readable = [i for i in range(j - 1, -1, -1) if i not in bad]
-        earlier = readable[:neighbours] if j not in bad else readable[:1]
-        if not readable:  # nothing readable before it: one link that says why
-            earlier = [j - 1]
-        for rank, i in enumerate(earlier):
-            kind = LinkKind.ADJACENT if rank == 0 else LinkKind.SKIP
-            links.append(PlannedLink(i, j, kind))
+        links.append(PlannedLink(readable[0] if readable else j - 1, j, LinkKind.ADJACENT))
     return links
+
+
+def default_radius(groups: Sequence[Mapping[int, np.ndarray]]) -> float:
+    """:data:`RADIUS_FACTOR` times the median distance (m) from a placed scan to the nearest
+    other scan of its group; NaN when no group has two scans."""
+    nearest = []
+    for group in groups:
+        xy = np.array(list(group.values())).reshape(-1, 2)
+        if len(xy) > 1:
+            d = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))
+            np.fill_diagonal(d, np.inf)
+            nearest.append(d.min(axis=1))
+    if not nearest:
+        return float("nan")
+    return RADIUS_FACTOR * float(np.median(np.concatenate(nearest)))
+
+
+def plan_near(
+    groups: Sequence[Mapping[int, np.ndarray]],
+    neighbours: int,
+    radius: float,
+    failed: set[Pair] = frozenset(),  # type: ignore[assignment]
+) -> set[Pair]:
+    """The pairs to register in each group of placed scans (scan -> (x, y) m, one frame per
+    group): each scan's ``neighbours`` nearest within ``radius`` m, and the minimum spanning
+    tree of the group's positions over the pairs not ``failed``."""
+    pairs: set[Pair] = set()
+    for group in groups:
+        ids = sorted(group)
+        if len(ids) < 2:
+            continue
+        xy = np.array([group[i] for i in ids])
+        d = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))
+        pairs |= _nearest(ids, d, neighbours, radius)
+        pairs |= _spanning_tree(ids, d, failed)
+    return pairs
+
+
+def _nearest(ids: list[int], d: np.ndarray, k: int, radius: float) -> set[Pair]:
+    out = set()
+    for a in range(len(ids)):
+        order = np.lexsort((np.arange(len(ids)), d[a]))  # ties: the lower index
+        near = [b for b in order if b != a and d[a, b] <= radius][:k]
+        out |= {pair_of(ids[a], ids[b]) for b in near}
+    return out
+
+
+def _spanning_tree(ids: list[int], d: np.ndarray, failed: set[Pair]) -> set[Pair]:
+    """Prim's minimum spanning tree over the pairs not ``failed`` (a forest where those cut
+    the group); ties go to the lower indices."""
+    n = len(ids)
+    w = d.copy()
+    for a in range(n):
+        for b in range(n):
+            if a == b or pair_of(ids[a], ids[b]) in failed:
+                w[a, b] = np.inf
+    out: set[Pair] = set()
+    seen = np.zeros(n, dtype=bool)
+    for root in range(n):
+        if seen[root]:
+            continue
+        seen[root] = True
+        best, via = w[root].copy(), np.full(n, root)
+        while True:
+            best[seen] = np.inf
+            nxt = int(np.argmin(best))
+            if not np.isfinite(best[nxt]):
+                break
+            seen[nxt] = True
+            out.add(pair_of(ids[via[nxt]], ids[nxt]))
+            closer = w[nxt] < best
+            best[closer], via[closer] = w[nxt][closer], nxt
+    return out
 
 
 def read_pairs(path: Path, names: Sequence[str]) -> list[PlannedLink]:
@@ -96,52 +170,10 @@ def _scan_index(cell: str, lookup: dict[str, int], n: int) -> int | None:
 
 def merge(links: Iterable[PlannedLink]) -> list[PlannedLink]:
     """One link per unordered pair (the first planned wins), in a stable order."""
-    seen: set[tuple[int, int]] = set()
+    seen: set[Pair] = set()
     out = []
     for link in links:
-        pair = (min(link.target, link.source), max(link.target, link.source))
-        if pair not in seen:
-            seen.add(pair)
+        if link.pair not in seen:
+            seen.add(link.pair)
             out.append(link)
     return out
-
-
-def median_adjacent_length(
-    links: Sequence[PlannedLink], poses: Sequence[np.ndarray | None]
-) -> float:
-    """Median distance (m) between the scans of the adjacent links whose scans both have a
-    pose; NaN when none has."""
-    lengths = [
-        float(np.linalg.norm(poses[k.target][:3, 3] - poses[k.source][:3, 3]))
-        for k in links
-        if k.kind is LinkKind.ADJACENT
-        and poses[k.target] is not None
-        and poses[k.source] is not None
-    ]
-    return float(np.median(lengths)) if lengths else float("nan")
-
-
-def plan_loops(
-    poses: Sequence[np.ndarray | None],
-    existing: Iterable[PlannedLink],
-    radius: float,
-) -> list[PlannedLink]:
-    """Loop candidates: pairs of posed scans at most ``radius`` m apart (scanner positions in
-    the world) that no link joins yet, at most ``MAX_LOOPS_PER_SCAN`` per scan, nearest first;
-    the later scan is the source."""
-    joined = {(min(k.target, k.source), max(k.target, k.source)) for k in existing}
-    posed = [k for k, T in enumerate(poses) if T is not None]
-    pairs = []
-    for a in posed:
-        for b in posed:
-            if a < b and (a, b) not in joined:
-                d = float(np.linalg.norm(poses[a][:3, 3] - poses[b][:3, 3]))
-                if d <= radius:
-                    pairs.append((d, a, b))
-    count: dict[int, int] = {}
-    loops = []
-    for _, a, b in sorted(pairs):
-        if count.get(a, 0) < MAX_LOOPS_PER_SCAN and count.get(b, 0) < MAX_LOOPS_PER_SCAN:
-            loops.append(PlannedLink(a, b, LinkKind.LOOP))
-            count[a], count[b] = count.get(a, 0) + 1, count.get(b, 0) + 1
-    return loops

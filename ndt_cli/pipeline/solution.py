@@ -74,6 +74,12 @@ class NetworkSolution:
         return tuple(s.T_world_scan for s in self.scans)
 
 
+def usable(link: Link) -> bool:
+    """A link whose transform the network can test: registered, and not refuted by its data
+    (:func:`ndt_cli.ndt.quality.judge`)."""
+    return link.status in USABLE and not link.result.refuted
+
+
 def link_covariance(r: RegistrationResult) -> np.ndarray:
     """6x6 covariance of a link between the reduced frames (GTSAM Pose3 tangent, see
     :mod:`ndt_cli.pipeline.covariance`): from ICP's normal matrix when ICP refined it, else
@@ -166,7 +172,7 @@ def _adjusted(
     plain: tuple[np.ndarray | None, ...],
 ) -> NetworkSolution:
     """Verify and adjust the network of usable links; map nodes and edges back."""
-    used = [k for k, link in enumerate(links) if link.status in USABLE and not link.result.refuted]
+    used = [k for k, link in enumerate(links) if usable(link)]
     red = reductions(n_scans, links)
     edges = [
         Edge(

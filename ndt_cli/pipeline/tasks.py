@@ -1,4 +1,4 @@
-"""The tasks that worker processes run for a chain: prepare a scan, register a link.
+"""The tasks that worker processes run for a campaign: prepare a scan, register a link.
 
 Tasks never raise for a problem with the data: a scan that cannot be used becomes the one-line
 reason (a ``str``), a link that cannot be registered a failed :class:`Link`.
@@ -15,6 +15,7 @@ import numpy as np
 from ndt_cli.config.schema import Config
 from ndt_cli.errors import NdtError
 from ndt_cli.io.e57 import split_spec
+from ndt_cli.ndt.overlap import Sketch, sketch
 from ndt_cli.ndt.prepare import PreparedScan, load_and_prepare
 from ndt_cli.ndt.register import register_prepared
 from ndt_cli.pipeline.links import Link
@@ -33,12 +34,20 @@ class LinkJob:
     kind: LinkKind = LinkKind.ADJACENT
     guess: np.ndarray | None = None
 
+    @property
+    def pair(self) -> tuple[int, int]:
+        """The two scans, lower index first."""
+        return (min(self.target, self.source), max(self.target, self.source))
+
     def failed(self, reason: str) -> Link:
         return Link(self.index, self.target, self.source, self.key, failure=reason, kind=self.kind)
 
     def adopt(self, link: Link) -> Link:
-        """A finished link (e.g. of an earlier run) as this job's."""
-        return replace(link, index=self.index, kind=self.kind)
+        """A finished link with this job's inputs (e.g. of an earlier run, when its scans had
+        other places in the campaign) as this job's."""
+        return replace(
+            link, index=self.index, target=self.target, source=self.source, kind=self.kind
+        )
 
 
 CACHED_SCANS = 6  # prepared scans a worker process keeps for its next links
@@ -75,11 +84,24 @@ def prepare_scan(path: Path, cfg: Config) -> PreparedScan | str:
     return scan
 
 
-def scan_problem(path: Path, cfg: Config) -> str | None:
-    """None if the scan can be read and sliced, else the one-line reason (nothing is shipped
-    back: for executors whose tasks read the scans themselves)."""
+@dataclass(frozen=True)
+class ScanSummary:
+    """What a campaign keeps of a scan: its preview points (x, y, z, scan frame) for the top
+    view, its sketch for the overlap search and, where tasks are shipped their scans, the
+    prepared scan itself."""
+
+    preview: np.ndarray
+    sketch: Sketch
+    prepared: PreparedScan | None = None
+
+
+def summarise_scan(path: Path, cfg: Config, ship: bool) -> ScanSummary | str:
+    """The scan's :class:`ScanSummary` (with the prepared scan when ``ship``), or the one-line
+    reason why it cannot be used."""
     value = prepare_scan(path, cfg)
-    return value if isinstance(value, str) else None
+    if isinstance(value, str):
+        return value
+    return ScanSummary(value.preview(), sketch(value), value if ship else None)
 
 
 def register_link(job: LinkJob, target: PreparedScan, source: PreparedScan, cfg: Config) -> Link:

@@ -15,7 +15,7 @@ from ndt_cli.io.matrices import format_matrix, format_pose_line
 from ndt_cli.io.outdir import publish
 from ndt_cli.io.serialize import csv_text, to_json
 from ndt_cli.ndt.result import Status
-from ndt_cli.pipeline.chain import ChainResult
+from ndt_cli.pipeline.campaign import ChainResult
 from ndt_cli.pipeline.scans import file_stem, link_file_name
 from ndt_cli.pipeline.solution import ScanPose
 from ndt_cli.pipeline.verify import NodeStatus
@@ -60,7 +60,7 @@ def summary(result: ChainResult, runtime_s: float) -> dict[str, Any]:
                 for k, s in enumerate(sol.scans)
                 if s.status.value != "ok"
             },
-            "loop_radius_m": None if np.isnan(result.loop_radius) else result.loop_radius,
+            "radius_m": None if np.isnan(result.radius) else result.radius,
         },
     }
 

@@ -20,7 +20,7 @@ from ndt_cli.report.html import Figure, HtmlReport, LinkRow, ScanRow, Verdict, r
 
 if TYPE_CHECKING:  # a pair's report does not load the network's modules
     from ndt_cli.ndt.result import RegistrationResult
-    from ndt_cli.pipeline.chain import ChainResult
+    from ndt_cli.pipeline.campaign import ChainResult
     from ndt_cli.pipeline.links import Link
     from ndt_cli.pipeline.solution import LinkFit, ScanPose
 
@@ -82,7 +82,7 @@ def chain_report(result: ChainResult, config_yaml: str, runtime_s: float, topvie
         ("world frame", f"the frame of {result.names[result.anchor]} (anchor)"),
         ("links", f"{len(result.links)}: " + _counts(k.kind.value for k in result.links)),
         ("network", solved + _counts(states)),
-        ("loop radius", "none" if np.isnan(result.loop_radius) else f"{result.loop_radius:.1f} m"),
+        ("link radius", "none" if np.isnan(result.radius) else f"{result.radius:.1f} m"),
         ("run time", f"{runtime_s:.1f} s"),
     )
     return _render(

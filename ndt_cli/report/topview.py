@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ndt_cli.pipeline.chain import ChainResult
+from ndt_cli.pipeline.campaign import ChainResult
 from ndt_cli.pipeline.links import Link
 from ndt_cli.pipeline.solution import LinkFit
 from ndt_cli.pipeline.verify import EdgeState, NodeStatus

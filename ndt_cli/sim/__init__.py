@@ -5,6 +5,7 @@ Frames: the **world frame** (right-handed, z up, ground z = 0, the street along 
 gives bit-identical output.
 """
 
+from ndt_cli.sim.campaigns import Survey, block_loop, junction, route, shuffled, two_sites
 from ndt_cli.sim.ground import Ground
 from ndt_cli.sim.scanner import make_sequence, scanner_pose, simulate_scan
 from ndt_cli.sim.scene import Scene, make_street
@@ -14,10 +15,16 @@ __all__ = [
     "Ground",
     "Scene",
     "StreetWorld",
+    "Survey",
+    "block_loop",
+    "junction",
     "make_sequence",
     "make_street",
     "passers_by",
+    "route",
     "scan_street",
     "scanner_pose",
+    "shuffled",
     "simulate_scan",
+    "two_sites",
 ]

@@ -1,0 +1,147 @@
+"""Benchmark sections of campaigns: how the cost grows with the number of scans (16, 64, 256
+very sparse simulated scans along a street, in walking order and shuffled), a street in
+shuffled order against the same street in order, and field mode's latency (a 2 M-point scan
+renamed into the watched folder until its outputs are published)."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+from benchmarks import data
+from benchmarks.common import RUN_BIN, fmt, table, target
+from ndt_cli import io, sim
+from ndt_cli.config import Config
+from ndt_cli.pipeline.campaign import Campaign
+from ndt_cli.pipeline.local_pool import WorkerPool
+
+CHAIN = str(RUN_BIN / "ndt-chain")
+WATCH = str(RUN_BIN / "ndt-watch")
+
+
+def _survey_files(survey: sim.Survey, folder: Path) -> list[Path]:
+    folder.mkdir(parents=True, exist_ok=True)
+    files = [folder / f"{n}.laz" for n in survey.names]
+    for f, pts in zip(files, survey.scans, strict=True):
+        io.write(f, pts)
+    return files
+
+
+def _campaign(files: list[Path], out: Path) -> tuple[float, Campaign]:
+    t0 = time.perf_counter()
+    campaign = Campaign(Config(), out, WorkerPool(2))
+    try:
+        campaign.add_scans(files)
+        result = campaign.result()
+    finally:
+        campaign.close()
+    return time.perf_counter() - t0, (campaign, result)
+
+
+def scaling(sizes: tuple[int, ...] = (16, 64, 256), shuffled_up_to: int = 64) -> None:
+    """Wall time, registrations and coarse matches per scan, in order and shuffled."""
+    print("## Campaigns: cost against the number of scans\n")
+    print("Very sparse simulated scans (600 x 80 rays) 16 m apart along one street, one")
+    print("process with two workers; `ok`: scans ok; per scan: wall time, registrations and")
+    print("coarse matches divided by the scans.\n")
+    rows, per_scan = [], {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in sizes:
+            survey = sim.route(seed=5, n_scans=n)
+            orders = [("walk", survey)]
+            if n <= shuffled_up_to:
+                orders.append(("shuffled", sim.shuffled(survey, seed=1)))
+            for label, s in orders:
+                files = _survey_files(s, Path(tmp) / f"{label}{n}")
+                wall, (campaign, result) = _campaign(files, Path(tmp) / f"out_{label}{n}")
+                ok = sum(x.status.value == "ok" for x in result.solution.scans)
+                per_scan[(label, n)] = wall / n
+                rows.append(
+                    [
+                        str(n),
+                        label,
+                        f"{ok}/{n}",
+                        fmt(wall, ".1f"),
+                        fmt(wall / n, ".2f"),
+                        fmt(len(campaign.finished) / n, ".2f"),
+                        fmt(len(campaign.coarse) / n, ".1f"),
+                    ]
+                )
+    table(["scans", "order", "ok", "wall (s)", "s/scan", "regs/scan", "coarse/scan"], rows)
+    lo, hi = min(sizes), max(sizes)
+    growth = per_scan[("walk", hi)] / per_scan[("walk", lo)]
+    target(
+        f"campaign in a walk: time per scan at {hi} / at {lo} scans",
+        growth,
+        2.0,
+        "<= 2 (roughly linear)",
+        "x",
+    )
+
+
+def order_ratio() -> None:
+    """A street of 8 sparse scans given in shuffled order against the same street in order
+    (ndt-chain as fresh processes, --jobs 2)."""
+    print("## A street in any order\n")
+    with tempfile.TemporaryDirectory() as tmp:
+        survey = sim.route(seed=21, n_scans=8, rays=(1000, 160))
+        times = {}
+        for label, s in (("in order", survey), ("shuffled", sim.shuffled(survey, seed=2))):
+            files = _survey_files(s, Path(tmp) / label)
+            t0 = time.perf_counter()
+            cmd = [CHAIN, *map(str, files), "-o", str(Path(tmp) / f"o{label}"), "-q", "-j", "2"]
+            subprocess.run(cmd, check=False)
+            times[label] = time.perf_counter() - t0
+    ratio = times["shuffled"] / times["in order"]
+    table(
+        ["street of 8 scans", "wall (s)"],
+        [[k, fmt(v, ".1f")] for k, v in times.items()],
+    )
+    target("ndt-chain of a shuffled street / in order", ratio, 2.0, "<= 2", "x")
+
+
+_TOOK = re.compile(r"; ([0-9.]+) s \(([0-9.]+) s since it landed\)")
+
+
+def watch_latency() -> None:
+    """Field mode: the full-density scans renamed into the watched folder one by one; the time
+    from the rename to the published outputs, once the process is warm (the third scan on)."""
+    print("## Field mode: from landing to published outputs\n")
+    files, _ = data.street()
+    rows, warm = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        folder, out, log = Path(tmp) / "card", Path(tmp) / "field", Path(tmp) / "watch.log"
+        folder.mkdir()
+        proc = subprocess.Popen(
+            [WATCH, str(folder), "--out", str(out), "-j", "2", "--exit-when-idle", "5"],
+            stderr=log.open("w"),
+        )
+        for k, f in enumerate(files):
+            shutil.copy(f, folder / f".{f.name}.part")
+            landed = time.time()
+            (folder / f".{f.name}.part").rename(folder / f.name)
+            while proc.poll() is None and len(log.read_text().splitlines()) < k + 1:
+                time.sleep(0.05)
+            line = log.read_text().splitlines()[k]
+            since = time.time() - landed
+            m = _TOOK.search(line)
+            took = float(m.group(1)) if m else float("nan")
+            rows.append([f.name, f"{data.las_points(f) / 1e6:.2f}", fmt(took), fmt(since)])
+            if k >= 2:
+                warm.append(since)
+        proc.wait(timeout=300)
+    table(["scan", "M points", "update (s)", "landing to line (s)"], rows)
+    worst = max(warm) if warm else float("nan")
+    what = "ndt-watch, warm: a 2 M-point scan landed to outputs published"
+    target(what, worst, 3.0, "<= 3 s", " s")
+
+
+def campaigns(quick: bool) -> None:
+    """Every campaign section (``quick``: 16 and 64 scans only)."""
+    scaling((16, 64) if quick else (16, 64, 256))
+    order_ratio()
+    watch_latency()

@@ -1,0 +1,87 @@
+"""A campaign's inputs from what a user gives: the scans in campaign order (natural order of
+the file names, E57 files expanded into their scans), the anchor (an index or a scan name), the
+network's options checked, and the user's pairs read. Everything is checked before any heavy
+work; a problem is a :class:`~ndt_cli.errors.NdtError` naming the option or the file."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from ndt_cli.errors import ConfigError, InputError
+from ndt_cli.pipeline.campaign import NetworkOptions
+from ndt_cli.pipeline.network import read_pairs
+from ndt_cli.pipeline.scans import natural_sort, scan_names
+
+
+@dataclass(frozen=True)
+class ChainInputs:
+    """The scans in campaign order, the anchor's index and the network's options."""
+
+    paths: tuple[Path, ...]
+    anchor: int
+    network: NetworkOptions
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(scan_names(list(self.paths)))
+
+
+def campaign_scans(scans: Sequence[str | Path]) -> list[Path]:
+    """The scans in campaign order: natural order of their names, each E57 file expanded into
+    its scans (``FILE.e57#K``)."""
+    from ndt_cli.io.e57 import expand
+
+    return expand(natural_sort(scans))
+
+
+def anchor_index(anchor: str, names: Sequence[str]) -> int:
+    """The index of the anchor scan given as an index or as a scan's (or file's) name."""
+    for k, name in enumerate(names):
+        if anchor in (name, Path(name).name):
+            return k
+    if anchor.isdigit() and int(anchor) < len(names):
+        return int(anchor)
+    raise ConfigError(
+        f"--anchor {anchor} is neither a scan index (0..{len(names) - 1}) nor a scan name"
+    )
+
+
+def network_options(
+    neighbours: int, adjust: bool, radius: float | None, pairs: Path | None, names: Sequence[str]
+) -> NetworkOptions:
+    """The network's options, checked; ``pairs``: a CSV of user pairs (see
+    :func:`~ndt_cli.pipeline.network.read_pairs`)."""
+    if not 1 <= neighbours <= 10:
+        raise ConfigError(f"--neighbours must be between 1 and 10, got {neighbours}")
+    if radius is not None and not 0 < radius <= 1e4:
+        raise ConfigError(f"--radius must be above 0 and at most 10000 m, got {radius}")
+    user = tuple(read_pairs(pairs, names)) if pairs is not None else ()
+    return NetworkOptions(neighbours, adjust, radius, user)
+
+
+def chain_inputs(
+    scans: Sequence[str | Path],
+    *,
+    anchor: str = "0",
+    neighbours: int = 4,
+    adjust: bool = True,
+    radius: float | None = None,
+    pairs: Path | None = None,
+) -> ChainInputs:
+    """Everything ``ndt-chain`` needs to know before it starts, checked."""
+    paths = campaign_scans(scans)
+    if len(paths) < 2:
+        raise InputError("ndt-chain needs at least two scans")
+    names = scan_names(paths)
+    index = anchor_index(anchor, names)
+    net = network_options(neighbours, adjust, radius, pairs, names)
+    return ChainInputs(tuple(paths), index, net)
+
+
+def expected_links(n_scans: int, network: NetworkOptions) -> int:
+    """About how many links a campaign of ``n_scans`` registers (for a progress display):
+    half of each scan's neighbours (links are shared), the chain, the user's pairs."""
+    per_scan = 1.0 if network.classic else max(1.0, network.neighbours / 2)
+    return max(1, round(per_scan * (n_scans - 1))) + len(network.pairs)

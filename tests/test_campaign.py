@@ -1,0 +1,159 @@
+"""A campaign in any order: scans known by their content, links found from where the scans
+are, the same network whatever the order. Expected poses come from the simulator's ground
+truth; equal results are compared with each other, never with numbers from the code."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import street_files
+from typer.testing import CliRunner
+
+from ndt_cli import io, sim
+from ndt_cli.cli import chain_app
+from ndt_cli.config import Config
+from ndt_cli.core.transforms import transform_errors
+from ndt_cli.errors import ConfigError, InputError
+from ndt_cli.io.matrices import read_pose_list
+from ndt_cli.pipeline.chain import run_chain
+from ndt_cli.pipeline.inputs import anchor_index, chain_inputs
+from ndt_cli.pipeline.network import LinkKind, PlannedLink
+from ndt_cli.pipeline.verify import NodeStatus
+
+runner = CliRunner()
+ROT, TRANS = 0.3, 0.15  # deg, m: a pose within these of the truth is right
+
+
+def _write(folder: Path, survey: sim.Survey) -> list[Path]:
+    folder.mkdir(parents=True, exist_ok=True)
+    files = [folder / f"{name}.laz" for name in survey.names]
+    for f, pts in zip(files, survey.scans, strict=True):
+        io.write(f, pts)
+    return files
+
+
+def _right(T: np.ndarray | None, truth: np.ndarray) -> bool:
+    if T is None:
+        return False
+    rot, trans = transform_errors(T, truth)
+    return rot < ROT and trans < TRANS
+
+
+def test_inputs_are_sorted_checked_and_the_anchor_named(tmp_path):
+    for name in ("s10.xyz", "s2.xyz", "s1.xyz"):
+        (tmp_path / name).write_text("0 0 0\n")
+    inputs = chain_inputs(
+        [tmp_path / "s10.xyz", tmp_path / "s2.xyz", tmp_path / "s1.xyz"], anchor="s2.xyz"
+    )
+    assert [p.name for p in inputs.paths] == ["s1.xyz", "s2.xyz", "s10.xyz"]
+    assert inputs.anchor == 1 and inputs.network.neighbours == 4
+    assert anchor_index("2", inputs.names) == 2
+    with pytest.raises(ConfigError, match="--anchor nope"):
+        anchor_index("nope", inputs.names)
+    with pytest.raises(ConfigError, match="--radius"):
+        chain_inputs(inputs.paths, radius=0.0)
+    with pytest.raises(ConfigError, match="--neighbours"):
+        chain_inputs(inputs.paths, neighbours=11)
+    with pytest.raises(InputError, match="at least two"):
+        chain_inputs(inputs.paths[:1])
+    pairs = tmp_path / "pairs.csv"
+    pairs.write_text("s1.xyz,s10.xyz\n")
+    user = chain_inputs(inputs.paths, pairs=pairs).network.pairs
+    assert user == (PlannedLink(0, 2, LinkKind.USER),)
+
+
+@pytest.fixture(scope="module")
+def street8(tmp_path_factory):
+    """Eight scans of one street (13-17 m apart) as LAZ files, and their true poses."""
+    return street_files(tmp_path_factory.mktemp("street8"), n_scans=8)
+
+
+def _link_files(out: Path) -> set[str]:
+    return {p.name for p in (out / "links").glob("*.json")}
+
+
+@pytest.mark.slow
+def test_inserting_a_scan_in_the_middle_reuses_every_earlier_link(street8, tmp_path):
+    files, _ = street8
+    out = tmp_path / "out"
+    first = run_chain([files[k] for k in (0, 1, 3, 4)], Config(), out, jobs=2)
+    before = _link_files(out)
+    second = run_chain(files[:5], Config(), out, jobs=2, resume=True)  # scan 2 in the middle
+    assert second.ok  # (the first, with a 30 m gap, need not be)
+
+    def pairs(result):
+        return {
+            (result.names[k.target], result.names[k.source]): n for n, k in enumerate(result.links)
+        }
+
+    earlier, now = pairs(first), pairs(second)
+    kept = [n for pair, n in now.items() if pair in earlier]  # links of both networks
+    assert len(kept) >= 2  # 0-1 and 3-4 at least: the links scan 2 does not replace
+    assert set(kept) <= set(second.reused)  # every one of them taken, none registered again
+    assert before <= _link_files(out)  # and no link file was renamed or dropped
+
+
+@pytest.mark.slow
+def test_a_shuffled_street_gives_the_same_result_as_the_street_in_order(street8, tmp_path):
+    files, poses = street8
+    order = np.random.default_rng(3).permutation(len(files))  # file k holds scan order[k]
+    mixed = tmp_path / "mixed"
+    mixed.mkdir()
+    for k, scan in enumerate(order):
+        (mixed / f"scan_{k}.laz").write_bytes(files[scan].read_bytes())
+    anchor = f"scan_{int(np.flatnonzero(order == 0)[0])}.laz"  # scan 0, wherever it is now
+    a, b = tmp_path / "in_order", tmp_path / "shuffled"
+    assert runner.invoke(chain_app, [*map(str, files), "-o", str(a), "-q"]).exit_code == 0
+    args = [*map(str, sorted(mixed.glob("*.laz"))), "-o", str(b), "-q", "--anchor", anchor]
+    assert runner.invoke(chain_app, args).exit_code == 0  # every scan ok
+    in_order, shuffled = read_pose_list(a / "poses.txt"), read_pose_list(b / "poses.txt")
+    inv0 = np.linalg.inv(poses[0])
+    for k, scan in enumerate(order):
+        T_a, T_b = in_order[f"scan_{scan}.laz"], shuffled[f"scan_{k}.laz"]
+        rot, trans = transform_errors(T_a, T_b)
+        assert rot < 0.001 and trans < 0.001, (scan, rot, trans)  # the same pose
+        assert _right(T_a, inv0 @ poses[scan])
+    # the cost: at most twice the registrations of the street in order
+    assert len(_link_files(b)) <= 2 * len(_link_files(a))
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    reason="known defect: two simulated streets register ok onto each other (a false ok "
+    "link the gate lets through), and one such link joins the sites",
+)
+def test_two_campaigns_in_one_call_keep_apart(tmp_path):
+    both = sim.two_sites(seed=2, n_scans=(4, 3))
+    files = _write(tmp_path / "scans", both)
+    out = tmp_path / "out"
+    res = runner.invoke(chain_app, [*map(str, files), "-o", str(out), "-q", "-j", "2"])
+    assert res.exit_code == 1, res.output  # not every scan is ok in one frame
+    poses = read_pose_list(out / "poses.txt")
+    inv0 = np.linalg.inv(both.poses[0])
+    for name, T, site in zip(both.names, both.poses, both.site, strict=True):
+        if site == 0:  # the anchor's campaign: ok, right
+            assert _right(poses[f"{name}.laz"], inv0 @ T), name
+        else:  # never ok in the anchor's frame
+            assert f"{name}.laz" not in poses
+    summary = json.loads((out / "summary.json").read_text())
+    assert sorted(summary["network"]["scans_not_ok"]) == ["b_00.laz", "b_01.laz", "b_02.laz"]
+
+
+@pytest.mark.slow
+def test_a_junction_side_streets_and_a_loop_are_all_ok_without_pairs(tmp_path):
+    loop = sim.block_loop(seed=0)
+    files = _write(tmp_path / "scans", loop)
+    result = run_chain(files, Config(), tmp_path / "out", jobs=2)
+    inv0 = np.linalg.inv(loop.poses[0])
+    for k, s in enumerate(result.solution.scans):
+        assert s.status is NodeStatus.OK, (k, s.reason)
+        assert _right(s.T_world_scan, inv0 @ loop.poses[k]), k
+    # the loop is closed: a link joins the last scan to the scans where the loop began
+    last = len(files) - 1
+    assert any(
+        last in (k.target, k.source) and abs(k.target - k.source) > 5 and k.ok for k in result.links
+    )
