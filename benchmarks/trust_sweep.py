@@ -109,7 +109,8 @@ class Case:
 
 def simulated(world: StreetWorld) -> tuple[list[Path], list[np.ndarray]]:
     """The world's scans as LAS files and their true poses, cached."""
-    sources = sorted((ROOT / "ndt_cli" / "sim").glob("*.py"))
+    sim_dir = ROOT / "ndt_cli" / "sim"  # what a street's scans depend on
+    sources = [sim_dir / f"{m}.py" for m in ("ground", "scene", "scanner", "worlds")]
     key = hashlib.sha256(b"".join(f.read_bytes() for f in sources) + repr(world).encode())
     folder = CACHE / f"s{world.seed}_{key.hexdigest()[:12]}"
     files = [folder / f"scan_{k:02d}.las" for k in range(world.n_scans)]

@@ -113,6 +113,12 @@ def test_the_origin_must_lie_inside_the_scan():
     room = _room()
     assert scanner_inside(room)
     assert not scanner_inside(room + np.array([500_000.0, 5_400_000.0, 0.0]))  # georeferenced
+    floor = np.column_stack([np.random.default_rng(1).uniform(-5, 5, (4000, 2)), np.zeros(4000)])
+    floor = floor[np.hypot(floor[:, 0], floor[:, 1]) > 0.5]  # the scanner's own blind spot
+    both = np.vstack([room, floor])
+    sector = both[(both[:, 0] > 0.0) & (np.abs(both[:, 1]) < both[:, 0])]  # a 90 degree sector
+    assert sector[:, 0].min() > 0.0 and scanner_inside(sector)  # its apex is the scanner
+    assert not scanner_inside(sector + np.array([5.0, 0.0, 0.0]))  # 5 m beyond its edge
 
 
 @pytest.mark.parametrize(

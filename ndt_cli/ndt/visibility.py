@@ -105,11 +105,16 @@ class Sight:
         return cls.of(points, levelled[:, 2] - scan.terrain.at(levelled[:, :2]))
 
 
+SCANNER_MARGIN = 1.0  # m: a scan of one sector has its scanner at the sector's apex, its edge
+
+
 def scanner_inside(points: np.ndarray) -> bool:
-    """Whether the origin lies inside the horizontal extent of the points: a scan in its
-    scanner's frame does, a georeferenced one does not (then the check is skipped)."""
+    """Whether the origin lies inside the horizontal extent of the points (within
+    :data:`SCANNER_MARGIN`): a scan in its scanner's frame does, even one cut to a sector; a
+    georeferenced one does not (then the check is skipped)."""
     x, y = points[:, 0], points[:, 1]  # column by column: several times faster on (N,3) rows
-    return bool(x.min() < 0.0 < x.max() and y.min() < 0.0 < y.max())
+    m = SCANNER_MARGIN
+    return bool(x.min() - m < 0.0 < x.max() + m and y.min() - m < 0.0 < y.max() + m)
 
 
 def margin(voxel: float) -> float:

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ndt_cli.ndt.result import RegistrationResult, Status
-from ndt_cli.pipeline.covariance import icp_covariance, ndt_covariance
+from ndt_cli.pipeline.covariance import DEFAULT_MAX_SIGMA, icp_covariance, ndt_covariance
 from ndt_cli.pipeline.graph import Edge, EdgeResidual
 from ndt_cli.pipeline.links import Link
 from ndt_cli.pipeline.network import LinkKind
@@ -83,14 +83,25 @@ def usable(link: Link) -> bool:
 def link_covariance(r: RegistrationResult) -> np.ndarray:
     """6x6 covariance of a link between the reduced frames (GTSAM Pose3 tangent, see
     :mod:`ndt_cli.pipeline.covariance`): from ICP's normal matrix when ICP refined it, else
-    from the NDT Hessian."""
+    from the NDT Hessian. A degenerate link says nothing of where the scans are horizontally,
+    whatever the small curvature along its weak direction suggests: a corridor's links all
+    settle where their starts put them and so agree with each other, and the weak directions
+    that different links find differ by degrees, so that together they would seem to pin the
+    corridor's axis down. Its horizontal translation is "unknown" (as
+    :data:`~ndt_cli.pipeline.covariance.DEFAULT_MAX_SIGMA`); its rotation and height count."""
     refined = r.icp_hessian is not None and np.isfinite(r.icp_rms) and r.icp_centroid is not None
     rejected = any(w.startswith("ICP refinement rejected") for w in r.warnings)
     if refined and not rejected:
-        return icp_covariance(r.icp_hessian, r.icp_centroid, r.T_reduced, r.icp_rms)
-    return ndt_covariance(
-        r.hessian, r.T_reduced, level_target=r.level_target, level_source=r.level_source
-    )
+        cov = icp_covariance(r.icp_hessian, r.icp_centroid, r.T_reduced, r.icp_rms)
+    else:
+        cov = ndt_covariance(
+            r.hessian, r.T_reduced, level_target=r.level_target, level_source=r.level_source
+        )
+    if r.status is Status.DEGENERATE:
+        flat = r.level_target.T[:, :2]  # the target's horizontal axes, in its reduced frame
+        h = r.T_reduced[:3, :3].T @ flat  # as the source body axes see them
+        cov = cov + DEFAULT_MAX_SIGMA**2 * np.pad(h @ h.T, ((3, 0), (3, 0)))
+    return cov
 
 
 def _translation(v: np.ndarray) -> np.ndarray:
