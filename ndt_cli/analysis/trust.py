@@ -80,7 +80,8 @@ class TrustCounts:
     links_ok: int = 0
     link_false_alarms: int = 0  # correct, not ok
     link_wrong_ok: int = 0  # ok, not correct
-    link_wrong_kept: int = 0  # not correct, kept by the network
+    link_wrong_kept: int = 0  # not correct, kept by the network (a degenerate link is kept
+    # for its rotation and height only: not counted)
     scans: int = 0
     scans_ok: int = 0
     scan_false_alarms: int = 0
@@ -172,7 +173,9 @@ def count(
         links_ok=len(ok_links),
         link_false_alarms=sum(x.correct and x.status is not Status.OK for x in links),
         link_wrong_ok=sum(not x.correct for x in ok_links),
-        link_wrong_kept=sum(not x.correct and x.state in KEPT for x in links),
+        link_wrong_kept=sum(
+            not x.correct and x.state in KEPT and x.status is not Status.DEGENERATE for x in links
+        ),
         scans=len(scans),
         scans_ok=len(ok_scans),
         scan_false_alarms=sum(

@@ -199,7 +199,10 @@ def _adjusted(
     scans = tuple(_scan_pose(node, red, v.roots, unreadable, links) for node in v.nodes)
     fits = [LinkFit(EdgeState.UNUSED, reason=_left_out(k)) for k in links]
     for verdict, k in zip(v.edges, used, strict=True):
-        fits[k] = LinkFit(verdict.state, verdict.residual, verdict.reason)
+        reason = verdict.reason
+        if links[k].status is Status.DEGENERATE and verdict.state is not EdgeState.REJECTED:
+            reason += "; degenerate: only its rotation and height count"
+        fits[k] = LinkFit(verdict.state, verdict.residual, reason)
     return NetworkSolution(scans, tuple(fits), plain, adjusted=True, timings=dict(v.timings))
 
 
