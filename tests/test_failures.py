@@ -398,7 +398,8 @@ def test_scans_behind_a_bad_link_get_no_pose(tmp_path):
     assert res.exit_code == 1
     poses = read_pose_list(tmp_path / "o" / "poses.txt")
     rows = (tmp_path / "o" / "pairs.csv").read_text().splitlines()[1:]
-    assert ",ok," not in rows[0] and ",ok," not in rows[1]  # both links of the foreign scan
+    foreign = [r for r in rows if ",scan_1.laz," in r]
+    assert not any(",ok," in r for r in foreign)  # no link of the foreign scan is ok
     assert "scan_1.laz" not in poses  # nothing is posed through them: the skip link around
     for name in set(poses) - {"scan_0.laz"}:  # the foreign scan poses the others, rightly
         k = int(name[5])
