@@ -69,6 +69,11 @@ def test_each_scan_is_levelled_to_the_vertical_not_to_its_sloping_ground(streets
     assert max(errors) < 0.03, errors  # the ground's normal is 1.1-3.5 degrees off here
 
 
+def test_without_control_the_worlds_z_is_the_vertical(streets):
+    errors = [s.world_vertical_deg for _, _, _, scans in streets for s in scans]
+    assert max(errors) < 0.02, errors  # each scan's vertical, combined over the network
+
+
 def test_the_slices_alone_are_near_the_truth_before_icp(streets):
     right = [x for _, _, links, _ in streets for x in links if x.correct]
     assert max(x.ndt_rot_deg for x in right) < 0.05

@@ -49,8 +49,9 @@ class LinkTruth:
 
 @dataclass(frozen=True)
 class ScanTruth:
-    """One scan against the truth: status, pose error relative to the anchor (deg, m; NaN
-    when unposed) and the error of its vertical (deg; NaN when no link prepared it)."""
+    """One scan against the truth: status, pose error relative to its cluster's first scan
+    (the anchor for cluster 0; deg, m; NaN when unposed), the error of its own vertical and of
+    the world's z as its pose has it (deg; NaN when unknown)."""
 
     index: int
     status: NodeStatus
@@ -60,6 +61,7 @@ class ScanTruth:
     cluster: int | None = None
     sigma_m: float = 0.0  # the network's 1-sigma of the position (norm over x, y, z), m
     sigma_deg: float = 0.0  # and of the heading, degrees
+    world_vertical_deg: float = float("nan")  # the world's z against the truth (cluster 0)
 
     @property
     def correct(self) -> bool:
@@ -148,12 +150,24 @@ def scan_truths(result: ChainResult, truth: Sequence[np.ndarray]) -> list[ScanTr
     vertical = verticals(result, truth)
     out = []
     for k, scan in enumerate(scans):
-        base = np.linalg.inv(truth[roots[scan.cluster if scan.cluster is not None else 0]])
-        rot, trans = _errors(scan.T_world_scan, base @ truth[k])
+        root = roots[scan.cluster if scan.cluster is not None else 0]
+        found = None
+        if scan.T_world_scan is not None and scans[root].T_world_scan is not None:
+            found = np.linalg.inv(scans[root].T_world_scan) @ scan.T_world_scan
+        rot, trans = _errors(found, np.linalg.inv(truth[root]) @ truth[k])
         sigma = np.zeros(4) if scan.sigma is None else scan.sigma
         sigmas = float(np.linalg.norm(sigma[:3])), float(sigma[3])
-        out.append(ScanTruth(k, scan.status, rot, trans, vertical[k], scan.cluster, *sigmas))
+        level = _up_error(scan.T_world_scan, truth[k]) if scan.cluster == 0 else float("nan")
+        out.append(ScanTruth(k, scan.status, rot, trans, vertical[k], scan.cluster, *sigmas, level))
     return out
+
+
+def _up_error(T_world_scan: np.ndarray | None, truth: np.ndarray) -> float:
+    """Angle (deg) between the world's z as a scan's pose has it and the true vertical."""
+    if T_world_scan is None:
+        return float("nan")
+    found, true = T_world_scan[2, :3], truth[2, :3]  # the world's z in the scan's axes
+    return float(np.degrees(np.arccos(np.clip(found @ true, -1.0, 1.0))))
 
 
 def count(

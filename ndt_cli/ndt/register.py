@@ -253,6 +253,11 @@ def register_prepared(
     return _result(target, source, stages, time.perf_counter() - t_start, timings)
 
 
+def _vertical(scan: PreparedScan) -> str:
+    """How a scan's vertical was found ("given" with ``ground.z``)."""
+    return "given" if scan.vertical is None else scan.vertical.source.value
+
+
 def _result(
     target: PreparedScan,
     source: PreparedScan,
@@ -295,6 +300,8 @@ def _result(
         score_per_point_final=s.score_final,
         notes=s.verdict.notes,
         refuted=s.verdict.refuted,
+        vertical_target=_vertical(target),
+        vertical_source=_vertical(source),
     )
 
 

@@ -121,6 +121,9 @@ class RegistrationResult:
     free_space_second: float = float("nan")  # that of the second-best pose
     notes: tuple[str, ...] = field(default=())  # what the gate checked and let pass
     refuted: bool = False  # the data contradict the pose (ndt_cli.ndt.quality.judge)
+    # how each scan's vertical was found (ndt_cli.ndt.vertical.VerticalSource; "given": ground.z)
+    vertical_target: str = ""
+    vertical_source: str = ""
 
     def __repr__(self) -> str:
         rot = f"yaw {self.yaw_deg:.4f} deg"
@@ -225,6 +228,8 @@ class RegistrationResult:
             "score_per_point_final": self.score_per_point_final,
             "notes": list(self.notes),
             "refuted": self.refuted,
+            "vertical_target": self.vertical_target,
+            "vertical_source": self.vertical_source,
         }
 
     @classmethod

@@ -38,6 +38,7 @@ from ndt_cli.errors import UserInterruptError, caused_by_interrupt
 from ndt_cli.ndt.overlap import COARSE_WINDOW, CoarseMatch, coarse_match
 from ndt_cli.ndt.prepare import PreparedScan
 from ndt_cli.ndt.result import Status
+from ndt_cli.pipeline.control import Control
 from ndt_cli.pipeline.discovery import (
     HINTS,
     Placed,
@@ -85,6 +86,7 @@ class NetworkOptions:
     adjust: bool = True
     radius: float | None = None
     pairs: tuple[PlannedLink, ...] = ()
+    controls: tuple[Control, ...] = ()  # stations of known coordinates (the world: theirs)
 
     @property
     def classic(self) -> bool:
@@ -191,7 +193,14 @@ class Campaign:
         links = self._network()
         if self.net.adjust and links:
             progress.info("adjusting the network of %d link(s)", len(links))
-        solution = solve(len(self.paths), self.anchor, links, self.net.adjust, self.unreadable)
+        solution = solve(
+            len(self.paths),
+            self.anchor,
+            links,
+            self.net.adjust,
+            self.unreadable,
+            self.net.controls,
+        )
         return ChainResult(
             scans=tuple(self.paths),
             names=tuple(scan_names(self.paths)),

@@ -17,16 +17,19 @@ coordinates never enter it: ``T_world_scan = T(r_root) X_scan T(-r_scan)``.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ndt_cli.ndt.result import RegistrationResult, Status
+from ndt_cli.pipeline.adjust import Solver
+from ndt_cli.pipeline.control import Control
 from ndt_cli.pipeline.covariance import DEFAULT_MAX_SIGMA, icp_covariance, ndt_covariance
+from ndt_cli.pipeline.datum import Cluster, Datum, datum
 from ndt_cli.pipeline.graph import Edge, EdgeResidual
 from ndt_cli.pipeline.links import Link
 from ndt_cli.pipeline.network import LinkKind
-from ndt_cli.pipeline.verify import EdgeState, NodeStatus, NodeVerdict, verify
+from ndt_cli.pipeline.verify import EdgeState, NodeStatus, NodeVerdict, Verification, verify
 
 USABLE = (Status.OK, Status.SUSPECT, Status.DEGENERATE)  # links whose transform can be tested
 # (unless the data refute it: ndt_cli.ndt.quality.judge)
@@ -68,6 +71,7 @@ class NetworkSolution:
     chained: tuple[np.ndarray | None, ...]
     adjusted: bool
     timings: dict[str, float] = field(default_factory=dict)
+    datum: Datum | None = None  # the anchor's cluster's world (None: the anchor's own frame)
 
     @property
     def poses(self) -> tuple[np.ndarray | None, ...]:
@@ -146,11 +150,14 @@ def solve(
     links: Sequence[Link],
     adjust: bool,
     unreadable: dict[int, str],
+    controls: Sequence[Control] = (),
 ) -> NetworkSolution:
-    """The pose and status of every scan, and the state of every link."""
+    """The pose and status of every scan, and the state of every link; with the adjustment,
+    the anchor's cluster in the world of :mod:`ndt_cli.pipeline.datum` (levelled, or the
+    coordinate system of the ``controls``)."""
     plain = tuple(chained(n_scans, links, anchor, {LinkKind.ADJACENT}))
     if adjust:
-        return _adjusted(n_scans, anchor, links, unreadable, plain)
+        return _adjusted(n_scans, anchor, links, unreadable, plain, controls)
     poses = chained(n_scans, links, anchor, set(LinkKind))
     scans = tuple(
         ScanPose(NodeStatus.OK, T, cluster=0)
@@ -181,8 +188,10 @@ def _adjusted(
     links: Sequence[Link],
     unreadable: dict[int, str],
     plain: tuple[np.ndarray | None, ...],
+    controls: Sequence[Control] = (),
 ) -> NetworkSolution:
-    """Verify and adjust the network of usable links; map nodes and edges back."""
+    """Verify and adjust the network of usable links, set it in the world; map nodes and edges
+    back."""
     used = [k for k, link in enumerate(links) if usable(link)]
     red = reductions(n_scans, links)
     edges = [
@@ -196,14 +205,93 @@ def _adjusted(
         for k in used
     ]
     v = verify(n_scans, anchor, edges)
-    scans = tuple(_scan_pose(node, red, v.roots, unreadable, links) for node in v.nodes)
+    scans = [_scan_pose(node, red, v.roots, unreadable, links) for node in v.nodes]
+    world = _datum(v, edges, links, red, controls)
+    if world is not None:
+        scans = _in_world(scans, world, v, red, anchor)
     fits = [LinkFit(EdgeState.UNUSED, reason=_left_out(k)) for k in links]
     for verdict, k in zip(v.edges, used, strict=True):
         reason = verdict.reason
         if links[k].status is Status.DEGENERATE and verdict.state is not EdgeState.REJECTED:
             reason += "; degenerate: only its rotation and height count"
         fits[k] = LinkFit(verdict.state, verdict.residual, reason)
-    return NetworkSolution(scans, tuple(fits), plain, adjusted=True, timings=dict(v.timings))
+    return NetworkSolution(
+        tuple(scans), tuple(fits), plain, adjusted=True, timings=dict(v.timings), datum=world
+    )
+
+
+def _verticals(links: Sequence[Link]) -> tuple[dict[int, np.ndarray], dict[int, str]]:
+    """Each scan's vertical (unit, scan axes) and how it was found, from the links that
+    prepared it."""
+    ups: dict[int, np.ndarray] = {}
+    sources: dict[int, str] = {}
+    for link in links:
+        r = link.result
+        if r is not None:
+            ups[link.target], sources[link.target] = r.level_target[2].copy(), r.vertical_target
+            ups[link.source], sources[link.source] = r.level_source[2].copy(), r.vertical_source
+    return ups, sources
+
+
+def _datum(
+    v: Verification,
+    edges: Sequence[Edge],
+    links: Sequence[Link],
+    red: Sequence[np.ndarray | None],
+    controls: Sequence[Control],
+) -> Datum | None:
+    """The world frame of the anchor's cluster (:mod:`ndt_cli.pipeline.datum`); None when the
+    anchor has no link (it is the world, as it stands)."""
+    anchor = v.adjustment.anchor
+    if red[anchor] is None:
+        return None
+    nodes = [n for n in v.nodes if n.cluster == 0 and v.adjustment.poses[n.index] is not None]
+    ups, sources = _verticals(links)
+    cluster = Cluster(
+        {n.index: _translation(red[anchor]) @ n.pose for n in nodes},
+        {n.index: red[n.index] for n in nodes},
+        {n.index: ups[n.index] for n in nodes if n.index in ups},
+        {n.index: sources[n.index] for n in nodes if n.index in sources},
+        anchor,
+    )
+    members = {n.index for n in nodes}
+    kept = [
+        k
+        for k, e in enumerate(v.edges)
+        if e.state in (EdgeState.CONFIRMED, EdgeState.USED) and {e.target, e.source} <= members
+    ]
+    solver = Solver(len(red), anchor, edges, None, "huber", float(np.sqrt(v.threshold)), 100)
+    return datum(cluster, controls, solver, kept)
+
+
+def _in_world(
+    scans: list[ScanPose],
+    world: Datum,
+    v: Verification,
+    red: Sequence[np.ndarray | None],
+    anchor: int,
+) -> list[ScanPose]:
+    """The scans of the anchor's cluster in the world of ``world`` (the others unchanged)."""
+    W = world.poses[anchor] @ np.linalg.inv(_translation(red[anchor]) @ v.nodes[anchor].pose)
+    out = []
+    for k, scan in enumerate(scans):
+        if scan.cluster != 0 or scan.T_world_scan is None:
+            out.append(scan)
+            continue
+        T = world.poses[k] @ _translation(-red[k]) if k in world.poses else W @ scan.T_world_scan
+        sigma = scan.sigma
+        if k in world.covariances:
+            sigma = _sigmas(world.poses[k][:3, :3], world.covariances[k])
+        out.append(replace(scan, T_world_scan=T, sigma=sigma))
+    return out
+
+
+def _sigmas(R: np.ndarray, covariance: np.ndarray) -> np.ndarray:
+    """1-sigma of a node's position (x, y, z in m, world axes) and heading (deg) from its 6x6
+    covariance (body frame) and its rotation ``R`` in the world."""
+    cov_t = R @ covariance[3:, 3:] @ R.T
+    cov_r = R @ covariance[:3, :3] @ R.T
+    return np.array([*np.sqrt(np.diag(cov_t)), np.degrees(np.sqrt(cov_r[2, 2]))])
 
 
 def _left_out(link: Link) -> str:
@@ -230,11 +318,6 @@ def _scan_pose(
         T = np.eye(4)
     else:
         T = _translation(red[root]) @ node.pose @ _translation(-red[k])
-    sigma = None
-    if node.covariance is not None:
-        R = node.pose[:3, :3]
-        cov_t = R @ node.covariance[3:, 3:] @ R.T  # position, world axes
-        cov_r = R @ node.covariance[:3, :3] @ R.T
-        sigma = np.array([*np.sqrt(np.diag(cov_t)), np.degrees(np.sqrt(cov_r[2, 2]))])
+    sigma = None if node.covariance is None else _sigmas(node.pose[:3, :3], node.covariance)
     reason = "" if node.status is NodeStatus.OK else node.reason
     return ScanPose(node.status, T, sigma, reason, node.cluster)

@@ -1,0 +1,269 @@
+"""The world frame of a campaign: levelled to the vertical, or the coordinate system of its
+control stations (:mod:`ndt_cli.pipeline.control`).
+
+Without control the world is the anchor's frame tipped about the anchor's ground point (below
+its centre; its coordinates there are kept) until its z is the vertical: the verticals of every
+scan of the anchor's cluster (each found when the scan was prepared,
+:mod:`ndt_cli.ndt.vertical`) carried into the anchor's frame by the adjusted poses and
+averaged, each weighted by how well it was found (:data:`VERTICAL_SIGMA_DEG`): not the anchor's
+own instrument axis, tilted by however its tripod stood. The world's x is the anchor's x tipped
+horizontal. An anchor whose ground point lies more than :data:`GEOREFERENCED_M` from its frame's
+origin is in a georeferenced frame already (its z the vertical): that frame is the world.
+
+With one station the frame is that levelled one moved so that the station's scanner sits at
+its coordinates; its heading stays the anchor's (one point cannot give it).
+
+With two or more stations the control enters the adjustment: each station is a prior on its
+scan's position (a GTSAM ``GPSFactor`` with its standard deviations, under a Huber kernel),
+each scan's vertical a prior on its tilt, the kept links between factors as before, and nothing
+else holds the frame. A station whose misfit exceeds its standard deviations (chi-square,
+3 DOF, p = 0.999) is rejected, worst first, and the network solved again: a wrong point number
+or a GNSS fix off by decimetres does not bend the network. With two stations left that
+disagree, which one is wrong cannot be told: both are rejected. The world is then the control's
+coordinate system (the graph works in it less the stations' mean, rounded, so that its numbers
+stay small).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ndt_cli.core.transforms import levelling_rotation, rotation4, translation
+from ndt_cli.pipeline.adjust import Solver
+from ndt_cli.pipeline.control import Control
+
+VERTICAL_SIGMA_DEG = {  # how well each way of finding a scan's vertical finds it (1 sigma)
+    "scanner": 0.005,  # a dual-axis compensator
+    "structures": 0.02,  # walls and poles: measured within 0.04 deg on varied streets
+    "structures+ground": 0.05,
+    "ground": 0.1,  # the ground's normal: right on level ground only
+    "given": 1.0,  # ground.z: no levelling at all
+}
+CHI2_3_999 = 16.266  # chi-square quantile, 3 degrees of freedom, p = 0.999
+GEOREFERENCED_M = 10_000.0  # a scan in its scanner's frame stands within its range of it
+
+
+@dataclass(frozen=True)
+class ControlFit:
+    """A station after the adjustment: where the network puts its scanner (world, m; None when
+    its scan is not posed in the anchor's cluster), whether it was used, and why not."""
+
+    control: Control
+    adjusted: np.ndarray | None
+    used: bool
+    reason: str = ""
+
+    @property
+    def residual(self) -> np.ndarray | None:
+        """Adjusted minus given (x, y, z; m), None without an adjusted position."""
+        return None if self.adjusted is None else self.adjusted - self.control.xyz
+
+
+@dataclass(frozen=True)
+class Datum:
+    """How the anchor's cluster sits in the world: ``T_world_node`` of each of its nodes (the
+    scans' reduced frames), their 6x6 covariances when the control adjustment gave new ones,
+    what the frame is, the stations and the combined vertical's standard deviation (deg)."""
+
+    poses: dict[int, np.ndarray]
+    covariances: dict[int, np.ndarray]
+    frame: str
+    controls: tuple[ControlFit, ...]
+    vertical_sigma_deg: float
+
+
+@dataclass(frozen=True)
+class Cluster:
+    """What the datum needs of the anchor's cluster: each node's ``T_anchor_node`` (the
+    anchor's scan frame from the node's reduced frame), its reduction point (scan frame, m),
+    its vertical (unit, scan axes) and how it was found."""
+
+    poses: dict[int, np.ndarray]
+    reductions: dict[int, np.ndarray]
+    ups: dict[int, np.ndarray]
+    sources: dict[int, str]
+    anchor: int = 0
+
+
+def combined_vertical(cluster: Cluster) -> tuple[np.ndarray, float]:
+    """The vertical in the anchor's frame: every scan's, carried by its pose, averaged with
+    weights 1/sigma^2; and its standard deviation (deg)."""
+    total, weight = np.zeros(3), 0.0
+    for v, T in cluster.poses.items():
+        if v in cluster.ups:
+            w = 1.0 / VERTICAL_SIGMA_DEG.get(cluster.sources.get(v, "given"), 1.0) ** 2
+            total += w * (T[:3, :3] @ cluster.ups[v])
+            weight += w
+    if weight == 0.0:
+        return np.array([0.0, 0.0, 1.0]), VERTICAL_SIGMA_DEG["given"]
+    return total / np.linalg.norm(total), float(1.0 / np.sqrt(weight))
+
+
+def _levelled(up: np.ndarray) -> np.ndarray:
+    """4x4 rotation turning ``up`` onto +z without a turn about z."""
+    return rotation4(levelling_rotation(-up[0] / up[2], -up[1] / up[2]))
+
+
+def _scanner(T_world_node: np.ndarray, reduction: np.ndarray) -> np.ndarray:
+    """Where a scan's scanner (its frame's origin) is in the world."""
+    return T_world_node[:3, :3] @ -reduction + T_world_node[:3, 3]
+
+
+def datum(
+    cluster: Cluster, controls: Sequence[Control], solver: Solver, kept: Sequence[int]
+) -> Datum:
+    """The world frame of the anchor's cluster (see the module docstring). ``solver``: the
+    network's, for the control adjustment; ``kept``: the edges it keeps in the cluster."""
+    up, sigma = combined_vertical(cluster)
+    ground = cluster.reductions[cluster.anchor]
+    georeferenced = np.linalg.norm(ground) > GEOREFERENCED_M
+    W = np.eye(4) if georeferenced else translation(ground) @ _levelled(up) @ translation(-ground)
+    levelled = {v: W @ T for v, T in cluster.poses.items()}
+    frame = "the anchor's own (georeferenced)" if georeferenced else "levelled"
+    usable = [c for c in controls if c.scan in cluster.poses]
+    fits = [ControlFit(c, None, False, "its scan is not in the anchor's cluster") for c in controls]
+    fits = [f for f in fits if f.control not in usable]
+    if len(usable) >= 2:
+        adjusted = _with_control(cluster, levelled, usable, solver, kept)
+        if adjusted is not None:
+            poses, covariances, used = adjusted
+            fits += [_fit(c, poses, cluster, c in used) for c in usable]
+            return Datum(poses, covariances, "control", tuple(fits), sigma)
+        fits += [
+            ControlFit(
+                c,
+                None,
+                False,
+                "the stations disagree beyond their standard "
+                "deviations and which is wrong cannot be told",
+            )
+            for c in usable
+        ]
+        return Datum(levelled, {}, frame, tuple(fits), sigma)
+    if len(usable) == 1:
+        c = usable[0]
+        shift = translation(c.xyz - _scanner(levelled[c.scan], cluster.reductions[c.scan]))
+        poses = {v: shift @ T for v, T in levelled.items()}
+        fits.append(_fit(c, poses, cluster, True, "one station: position only"))
+        return Datum(poses, {}, "control, heading from the anchor", tuple(fits), sigma)
+    return Datum(levelled, {}, frame, tuple(fits), sigma)
+
+
+def _fit(
+    c: Control, poses: dict[int, np.ndarray], cluster: Cluster, used: bool, reason: str = ""
+) -> ControlFit:
+    where = _scanner(poses[c.scan], cluster.reductions[c.scan])
+    if not used and not reason:
+        r = (where - c.xyz) / c.sigmas
+        reason = f"rejected: misfit chi2 {float(r @ r):.4g} > {CHI2_3_999:.2f}"
+    return ControlFit(c, where, used, reason)
+
+
+def _heading_fit(
+    levelled: dict[int, np.ndarray], stations: Sequence[Control], cluster: Cluster
+) -> np.ndarray:
+    """4x4 turn about z and shift taking the levelled anchor frame onto the control's
+    coordinates at the stations (weighted least squares: the frame is level already, so two
+    stations in a line are enough)."""
+    p = np.array([_scanner(levelled[c.scan], cluster.reductions[c.scan]) for c in stations])
+    q = np.array([c.xyz for c in stations])
+    w = np.array([1.0 / c.sigma_xy**2 for c in stations])
+    pm, qm = w @ p / w.sum(), w @ q / w.sum()
+    a, b = (p - pm)[:, :2], (q - qm)[:, :2]
+    cross = (w * (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])).sum()
+    dot = (w * (a * b).sum(axis=1)).sum()
+    yaw = np.arctan2(cross, dot)
+    R = np.array([[np.cos(yaw), -np.sin(yaw), 0.0], [np.sin(yaw), np.cos(yaw), 0.0], [0, 0, 1]])
+    return translation(qm) @ rotation4(R) @ translation(-pm)
+
+
+def _vertical_prior(g: object, v: int, T: np.ndarray, up: np.ndarray, sigma_deg: float) -> object:
+    """A prior on node ``v``'s tilt alone: its vertical ``up`` (body axes) points up in the
+    world within ``sigma_deg``; its heading and position are left free."""
+    world_up = T[:3, :3] @ up
+    Q = levelling_rotation(-world_up[0] / world_up[2], -world_up[1] / world_up[2])
+    mean = T.copy()
+    mean[:3, :3] = Q @ T[:3, :3]
+    basis = np.linalg.svd(np.eye(3) - np.outer(up, up))[0][:, :2]  # the two tilt axes
+    R = np.zeros((6, 6))
+    R[:2, :3] = basis.T / np.radians(sigma_deg)
+    return g.PriorFactorPose3(v, g.Pose3(mean), g.noiseModel.Gaussian.SqrtInformation(R))
+
+
+def _solve_controlled(
+    cluster: Cluster,
+    start: dict[int, np.ndarray],
+    stations: Sequence[Control],
+    solver: Solver,
+    kept: Sequence[int],
+) -> tuple[dict[int, np.ndarray], object, object]:
+    """Levenberg-Marquardt on the kept links, a position prior per station (on its node's
+    frame origin: the station less its reduction point turned by the current pose) and a tilt
+    prior per scan; the poses (local world), the graph and the values."""
+    g = solver.g
+    graph, values = g.NonlinearFactorGraph(), g.Values()
+    for k in kept:
+        graph.add(solver.factors[k])
+    huber = g.noiseModel.mEstimator.Huber.Create(float(np.sqrt(CHI2_3_999)))
+    for c in stations:
+        T = start[c.scan]
+        origin = c.xyz + T[:3, :3] @ cluster.reductions[c.scan]
+        noise = g.noiseModel.Robust.Create(huber, g.noiseModel.Diagonal.Sigmas(c.sigmas))
+        graph.add(g.GPSFactor(c.scan, origin, noise))
+    for v, T in start.items():
+        values.insert(v, g.Pose3(T))
+        if v in cluster.ups:
+            sig = VERTICAL_SIGMA_DEG.get(cluster.sources.get(v, "given"), 1.0)
+            graph.add(_vertical_prior(g, v, T, cluster.ups[v], sig))
+    params = g.LevenbergMarquardtParams()
+    params.setMaxIterations(solver.max_iterations)
+    values = g.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+    return {v: values.atPose3(v).matrix() for v in start}, graph, values
+
+
+def _worst(
+    stations: list[Control], poses: dict[int, np.ndarray], cluster: Cluster
+) -> tuple[Control, float]:
+    """The station whose misfit is largest, and its chi-square (3 DOF)."""
+    chi2 = []
+    for c in stations:
+        r = (_scanner(poses[c.scan], cluster.reductions[c.scan]) - c.xyz) / c.sigmas
+        chi2.append(float(r @ r))
+    k = int(np.argmax(chi2))
+    return stations[k], chi2[k]
+
+
+def _with_control(
+    cluster: Cluster,
+    levelled: dict[int, np.ndarray],
+    stations: Sequence[Control],
+    solver: Solver,
+    kept: Sequence[int],
+) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray], list[Control]] | None:
+    """The anchor's cluster adjusted with its stations (see the module docstring): the poses
+    and covariances in the control's coordinates and the stations used; None when two
+    stations are left and they disagree."""
+    used = list(stations)
+    origin = np.round(np.mean([c.xyz for c in used], axis=0))
+    local = [Control(c.scan, c.name, c.xyz - origin, c.sigma_xy, c.sigma_z) for c in used]
+    by_scan = {c.scan: c for c in local}
+    A = _heading_fit(levelled, local, cluster)
+    start = {v: A @ T for v, T in levelled.items()}
+    while True:
+        active = [by_scan[c.scan] for c in used]
+        poses, graph, values = _solve_controlled(cluster, start, active, solver, kept)
+        poses, graph, values = _solve_controlled(cluster, poses, active, solver, kept)
+        worst, chi2 = _worst(active, poses, cluster)
+        if chi2 <= CHI2_3_999:
+            break
+        if len(used) <= 2:
+            return None
+        used = [c for c in used if c.scan != worst.scan]
+        start = poses
+    marginals = solver.g.Marginals(graph, values)
+    covariances = {v: marginals.marginalCovariance(v) for v in poses}
+    shift = translation(origin)
+    return {v: shift @ T for v, T in poses.items()}, covariances, used

@@ -1,0 +1,146 @@
+"""Control stations: the file, and the world they give a network (levelled, or theirs)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_adjust import CHAIN, SKIPS, measured, rot
+
+from ndt_cli.core.transforms import rotation4, transform_errors
+from ndt_cli.errors import InputError
+from ndt_cli.pipeline.adjust import Solver
+from ndt_cli.pipeline.control import DEFAULT_SIGMA_XY, DEFAULT_SIGMA_Z, Control, read_control
+from ndt_cli.pipeline.datum import Cluster, datum
+
+NAMES = ("north/scan_0.laz", "scan_1.laz", "campaign.e57#2")
+
+
+def _file(tmp_path, text: str):
+    p = tmp_path / "control.csv"
+    p.write_text(text, encoding="utf-8")
+    return p
+
+
+def test_a_control_file_names_scans_as_the_outputs_do(tmp_path):
+    text = (
+        "scan,x,y,z,sigma_xy,sigma_z\n"
+        "# GNSS on the scanner\n"
+        "north/scan_0.laz,500000.125,5400000.5,101.25,0.01,0.015\n"
+        "scan_1.laz, 500030.0 , 5400001.0, 102.0,,\n"
+        "campaign.e57#2,500060,5400002,103\n"
+    )
+    got = read_control(_file(tmp_path, text), NAMES)
+    assert [c.scan for c in got] == [0, 1, 2]
+    np.testing.assert_array_equal(got[0].xyz, [500000.125, 5400000.5, 101.25])
+    assert (got[0].sigma_xy, got[0].sigma_z) == (0.01, 0.015)
+    assert (got[1].sigma_xy, got[1].sigma_z) == (DEFAULT_SIGMA_XY, DEFAULT_SIGMA_Z)
+    assert got[2].name == "campaign.e57#2"
+    by_file = read_control(_file(tmp_path, "scan_0.laz,1,2,3\n"), NAMES)  # the file's name
+    assert by_file[0].scan == 0
+
+
+@pytest.mark.parametrize(
+    ("text", "needle"),
+    [
+        ("scan_9.laz,1,2,3\n", "line 1: no scan named 'scan_9.laz'"),
+        ("scan,x,y,z\nscan_1.laz,1,nan,3\n", "line 2: y is not finite"),
+        ("scan_1.laz,1,2,3,0,0.1\n", "line 1: standard deviations must be positive"),
+        ("scan_1.laz,1,2,3\nscan_1.laz,1,2,3\n", "line 2: scan 'scan_1.laz' is given twice"),
+        ("scan_1.laz,1,2\n", "line 1: expected 'scan,x,y,z'"),
+        ("scan_1.laz,1,2,east\n", "line 1: z 'east' is not a number"),
+        ("# nothing\n", "no station in the control file"),
+        ("\ufeffscan_1.laz,1,2,3\n", "no scan named"),  # a BOM is not silently a header
+    ],
+)
+def test_every_problem_of_a_control_file_is_one_line_naming_it(tmp_path, text, needle):
+    with pytest.raises(InputError, match=needle) as err:
+        read_control(_file(tmp_path, text), NAMES)
+    assert "control.csv" in str(err.value) and "\n" not in str(err.value)
+    with pytest.raises(InputError, match="control file not found"):
+        read_control(tmp_path / "missing.csv", NAMES)
+
+
+def _sloped_street(rng, n: int = 8) -> list[np.ndarray]:
+    """True T_world_scan of scanners along a street rising 5 %, each tilted up to 1 deg."""
+    poses = []
+    for k in range(n):
+        x = 18.0 * k
+        R = rot([*np.radians(rng.uniform(-1, 1, 2)), rng.uniform(-np.pi, np.pi)])
+        T = rotation4(R)
+        T[:3, 3] = [x, 2.0 * np.sin(k), 0.05 * x + 1.6]
+        poses.append(T)
+    return poses
+
+
+def _network(rng, truth, vertical_noise_deg: float = 0.02):
+    """The network as the adjustment leaves it (poses in the anchor's frame, scans' reduction
+    points at their origins), each scan's vertical with noise, and a solver of its links."""
+    edges = [measured(truth, i, j, rng) for i, j in CHAIN + SKIPS]
+    anchor_frame = [np.linalg.inv(truth[0]) @ T for T in truth]
+    ups = {}
+    for k, T in enumerate(truth):
+        up = T[:3, :3].T @ [0.0, 0.0, 1.0]
+        up = up + np.radians(vertical_noise_deg) * rng.normal(size=3)
+        ups[k] = up / np.linalg.norm(up)
+    cluster = Cluster(
+        dict(enumerate(anchor_frame)),
+        {k: np.zeros(3) for k in range(len(truth))},
+        ups,
+        dict.fromkeys(range(len(truth)), "structures"),
+        0,
+    )
+    solver = Solver(len(truth), 0, edges, None, "huber", 4.74, 100)
+    return cluster, solver, list(range(len(edges)))
+
+
+def test_without_control_the_world_is_levelled_at_the_anchor():
+    rng = np.random.default_rng(3)
+    truth = _sloped_street(rng)
+    cluster, solver, kept = _network(rng, truth)
+    world = datum(cluster, (), solver, kept)
+    assert world.frame == "levelled"
+    for k, T in world.poses.items():
+        up_error = np.degrees(np.arccos(np.clip(T[2, :3] @ truth[k][2, :3], -1, 1)))
+        assert up_error < 0.02, (k, up_error)  # 8 verticals of 0.02 deg, averaged
+    np.testing.assert_allclose(world.poses[0][:3, 3], 0.0, atol=1e-12)  # its ground point kept
+    assert abs(world.poses[0][1, 0]) < 1e-3  # its x axis tipped horizontal, not turned about z
+
+
+def test_stations_put_the_network_in_their_coordinates_and_a_blunder_is_rejected():
+    rng = np.random.default_rng(4)
+    truth = _sloped_street(rng)
+    E = np.eye(4)
+    E[:3, :3] = rot([0.0, 0.0, 0.7])
+    E[:3, 3] = [500_000.0, 5_400_000.0, 230.0]  # UTM-like coordinates
+    crs = [E @ T for T in truth]
+    cluster, solver, kept = _network(rng, truth)
+    noise = rng.normal(0.0, [0.01, 0.01, 0.015], (3, 3))
+    stations = [
+        Control(k, f"s{k}", crs[k][:3, 3] + e) for k, e in zip((0, 3, 7), noise, strict=True)
+    ]
+    blunder = Control(5, "s5", crs[5][:3, 3] + [0.6, 0.0, 0.0])
+    world = datum(cluster, (*stations, blunder), solver, kept)
+    assert world.frame == "control"
+    for k, T in world.poses.items():
+        rot_err, trans = transform_errors(T, crs[k])
+        assert rot_err < 0.05 and trans < 0.03, (k, rot_err, trans)
+    fits = {f.control.name: f for f in world.controls}
+    assert not fits["s5"].used and "rejected" in fits["s5"].reason
+    assert fits["s5"].residual[0] == pytest.approx(-0.6, abs=0.05)  # adjusted minus given
+    assert all(fits[c.name].used for c in stations)
+    assert all(np.abs(fits[c.name].residual).max() < 0.05 for c in stations)
+    assert set(world.covariances) == set(world.poses)
+
+
+def test_one_station_moves_the_levelled_frame_two_that_disagree_are_both_given_up():
+    rng = np.random.default_rng(5)
+    truth = _sloped_street(rng)
+    cluster, solver, kept = _network(rng, truth)
+    one = datum(cluster, (Control(2, "s2", np.array([10.0, 20.0, 30.0])),), solver, kept)
+    assert one.frame == "control, heading from the anchor"
+    np.testing.assert_allclose(one.poses[2][:3, 3], [10.0, 20.0, 30.0], atol=1e-9)
+    a = Control(0, "s0", truth[0][:3, 3])
+    b = Control(4, "s4", truth[4][:3, 3] + [5.0, 0.0, 0.0])  # 5 m too far from a
+    two = datum(cluster, (a, b), solver, kept)
+    assert two.frame == "levelled" and not any(f.used for f in two.controls)
+    assert all("cannot be told" in f.reason for f in two.controls)
