@@ -45,7 +45,7 @@ def _analysis(target: Path, source: Path, config: str | None, at: Path | None, o
     from ndt_cli.io.matrices import read_matrix
     from ndt_cli.ndt.prepare import load_and_prepare
 
-    check_out(out)
+    check_out(out, target, source, at, config)
     cfg = load(config)
     T = read_matrix(at) if at is not None else None
     pair = Pair.make(load_and_prepare(target, cfg), load_and_prepare(source, cfg), cfg, T)

@@ -120,7 +120,7 @@ def chain(
             radius=radius,
             pairs=pairs,
         )
-        check_out(out)
+        check_out(out, *inputs.paths, pairs, config)
         result, runtime = _run(inputs, cfg, opts)
     _show(result, runtime, out, json_out, quiet)
     if not result.ok:

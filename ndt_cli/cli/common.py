@@ -266,8 +266,10 @@ def console(stderr: bool = False) -> object:
     return Console(file=stream, width=None if stream.isatty() else 10_000, soft_wrap=True)
 
 
-def check_out(out: Path) -> Path:
-    """The output folder, checked before any work: new, empty, or an earlier result."""
+def check_out(out: Path, *inputs: Path | str | None) -> Path:
+    """The output folder, checked before any work: new, empty, or an earlier result, and
+    neither one of the run's ``inputs`` (files and folders it reads; None and names that are
+    no file, such as a shipped config's, are skipped) nor holding or inside one."""
     from ndt_cli.io.outdir import check_output_folder
 
-    return check_output_folder(out)
+    return check_output_folder(out, [Path(p) for p in inputs if p is not None])

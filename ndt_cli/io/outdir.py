@@ -6,8 +6,10 @@ cannot exchange, two renames). Killed at any moment, a run leaves either the old
 new one, never a mix; a temporary folder left behind by a killed run is removed by the next run
 that writes the same output.
 
-An output folder holds only what ndt-cli writes there: a folder with other files is refused
-before any work starts, so that replacing it can never lose a user's file. Folders of resume
+An output folder holds only what ndt-cli writes there: every file a run writes is listed in
+the folder's manifest (``.ndt-cli-outputs``), and a folder with any other entry (at any depth)
+is refused before any work starts, so that replacing it can never lose a user's file; so is an
+output folder that is, holds or lies inside a file or folder the run reads. Folders of resume
 state (``links/``) are carried over into the new folder.
 """
 
@@ -51,11 +53,75 @@ def _entries(folder: Path) -> list[str]:
     return sorted(e.name + ("/" if e.is_dir() else "") for e in folder.iterdir())
 
 
-def check_output_folder(out: Path) -> Path:
+def listed_outputs(folder: Path) -> list[str] | None:
+    """The names (relative, ``/``-separated) the manifest of ``folder`` lists, or None when the
+    folder has no manifest."""
+    try:
+        text = (folder / MANIFEST).read_text(encoding="utf-8", errors="surrogateescape")
+    except FileNotFoundError:
+        return None
+    return [line for line in text.splitlines() if line]
+
+
+def _walk(folder: Path) -> tuple[list[str], list[str]]:
+    """(files, folders) under ``folder``, relative and ``/``-separated (folders end in ``/``),
+    without the manifest and the resume state."""
+    files, folders = [], []
+    for root, subdirs, names in os.walk(folder):
+        rel = Path(root).relative_to(folder).as_posix()
+        prefix = "" if rel == "." else rel + "/"
+        if not prefix:
+            subdirs[:] = [d for d in subdirs if d not in STATE]
+        folders += [prefix + d + "/" for d in subdirs]
+        files += [prefix + n for n in names if prefix + n != MANIFEST]
+    return files, folders
+
+
+def foreign_entries(folder: Path, listed: Iterable[str]) -> list[str]:
+    """Entries under ``folder`` that are neither in ``listed`` nor hold a listed file (nor the
+    manifest, nor resume state): what a run did not write."""
+    names = set(listed)
+    files, folders = _walk(folder)
+    foreign = [f for f in files if f not in names]
+    foreign += [d for d in folders if not any(n.startswith(d) for n in names)]
+    return sorted(foreign)
+
+
+def _foreign(real: Path) -> list[str]:
+    """What ``real`` holds that ndt-cli did not write (empty: an earlier result, or new)."""
+    listed = listed_outputs(real)
+    if listed is not None:
+        return foreign_entries(real, listed)
+    entries = _entries(real)
+    foreign = [e for e in entries if not KNOWN.match(e)]
+    return foreign or ([] if not entries or set(MARKERS) & set(entries) else entries)
+
+
+def _check_inputs(real: Path, out: Path, inputs: Iterable[str | Path]) -> None:
+    """Refuse an output folder that is, holds, or lies inside a file or folder the run reads."""
+    from ndt_cli.io.e57 import split_spec
+
+    for given in inputs:
+        path = split_spec(given)[0].resolve()
+        try:
+            inside = path == real or real in path.parents
+            holds = path.is_dir() and path in real.parents
+        except OSError:  # not to be seen here: its own check reports it
+            continue
+        if inside or holds:
+            raise OutputError(
+                f"the output folder must not be, hold or lie inside an input ({given}): "
+                "choose another folder",
+                out,
+            )
+
+
+def check_output_folder(out: Path, inputs: Iterable[str | Path] = ()) -> Path:
     """The folder a run may write (symlinks resolved): new, empty, or an earlier result.
 
     Raises :class:`OutputError` (checked before any work) when ``out`` is a file, the current
-    folder or one of its parents, cannot be written, or holds files ndt-cli did not write.
+    folder or one of its parents, cannot be written, holds files ndt-cli did not write (an
+    entry its manifest does not list), or is, holds or lies inside one of the run's ``inputs``.
     """
     if str(out) == "":
         raise OutputError("the output folder name is empty")
@@ -66,16 +132,14 @@ def check_output_folder(out: Path) -> Path:
             raise OutputError("the output path exists and is not a folder", out)
         if real == real.parent or Path.cwd().resolve().is_relative_to(real):
             raise OutputError("the output must be a folder of its own, not this folder", out)
-        if exists and not (real / MANIFEST).exists():
-            entries = _entries(real)
-            foreign = [e for e in entries if not KNOWN.match(e)]
-            if foreign or (entries and not set(MARKERS) & set(entries)):
-                shown = (foreign or entries)[0]
-                raise OutputError(
-                    f"the folder holds files that ndt-cli did not write ({shown}, ...): "
-                    "choose a new or empty folder",
-                    out,
-                )
+        _check_inputs(real, out, inputs)
+        foreign = _foreign(real) if exists else []
+        if foreign:
+            raise OutputError(
+                f"the folder holds files that ndt-cli did not write ({foreign[0]}, ...): "
+                "choose a new or empty folder",
+                out,
+            )
         parent = real.parent  # the new content is staged in a folder beside the output
         while not parent.exists():
             parent = parent.parent
@@ -155,7 +219,12 @@ def _write(folder: Path, files: Mapping[str, Content]) -> None:
                 fh.write(data)
                 fh.flush()
                 os.fsync(fh.fileno())
-    (folder / MANIFEST).write_text("\n".join(sorted(files)) + "\n", encoding="utf-8")
+
+
+def _write_manifest(folder: Path) -> None:
+    """List every file of ``folder`` but the resume state in its manifest."""
+    text = "".join(f"{n}\n" for n in sorted(_walk(folder)[0]))
+    (folder / MANIFEST).write_text(text, encoding="utf-8", errors="surrogateescape")
 
 
 def _sync_folder(folder: Path) -> None:
@@ -193,6 +262,7 @@ def publish(out: Path, files: Mapping[str, Content], keep_others: bool = False) 
         if real.is_dir():
             others = [e.name for e in real.iterdir() if e.name not in files and e.name != MANIFEST]
             _carry(real, tmp, others if keep_others else STATE)
+        _write_manifest(tmp)
         _sync_folder(tmp)
         old = _swap_in(tmp, real)
     except OSError as exc:

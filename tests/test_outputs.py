@@ -1,0 +1,92 @@
+"""Outputs never destroy what is not theirs: a result folder holds only what ndt-cli wrote, a
+re-run never removes anything else, and no output is, or overwrites, an input."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from ndt_cli.cli import chain_app, register_app
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "sample_data"
+runner = CliRunner()
+
+
+def tree(folder: Path) -> dict[str, bytes]:
+    """Every file under ``folder`` (relative name -> bytes)."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+def one_error_line(res, prog: str) -> str:
+    """The single line a failed command prints on stderr."""
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"{prog}: error:"), res.output
+    assert "Traceback" not in res.output
+    return lines[0]
+
+
+def copies(folder: Path, *names: str) -> list[Path]:
+    """Copies of sample scans in ``folder``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    return [Path(shutil.copy(SAMPLE / n, folder / n)) for n in names]
+
+
+@pytest.fixture(scope="module")
+def pair_result(tmp_path_factory) -> Path:
+    """An ndt-register result of two copies of the sample scans (the copies beside it)."""
+    root = tmp_path_factory.mktemp("pair")
+    scans = copies(root / "scans", "scan_00.laz", "scan_01.laz")
+    res = runner.invoke(register_app, [*map(str, scans), "-o", str(root / "res"), "-q"])
+    assert res.exit_code == 0, res.output
+    return root / "res"
+
+
+def _copy(result: Path, dst: Path) -> Path:
+    shutil.copytree(result, dst)
+    return dst
+
+
+# --- a re-run into a result folder ---------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("kept", "needle"),
+    [("scans", "must not be, hold or lie inside an input"), ("notes", "did not write")],
+)
+def test_a_rerun_into_a_result_folder_never_deletes_the_users_files(
+    pair_result, tmp_path, kept, needle
+):
+    out = _copy(pair_result, tmp_path / "res")
+    (out / "notes.txt").write_text("my notes")
+    where = out if kept == "scans" else tmp_path  # the user keeps the scans there, or not
+    scans = copies(where, "scan_00.laz", "scan_01.laz")
+    before = tree(out)
+    res = runner.invoke(register_app, [*map(str, scans), "-o", str(out), "-q"])
+    assert res.exit_code == 2
+    assert needle in one_error_line(res, "ndt-register")
+    assert tree(out) == before
+
+
+def test_a_file_added_inside_a_result_subfolder_is_foreign_too(tmp_path):
+    scans = copies(tmp_path / "scans", "scan_00.laz", "scan_01.laz")
+    out = tmp_path / "chain"
+    res = runner.invoke(chain_app, [*map(str, scans), "-o", str(out), "-q", "--jobs", "1"])
+    assert res.exit_code in (0, 1), res.output
+    (out / "poses" / "my_pose.txt").write_text("1 0 0 0")
+    before = tree(out)
+    again = runner.invoke(chain_app, [*map(str, scans), "-o", str(out), "-q", "--jobs", "1"])
+    assert again.exit_code == 2 and "my_pose.txt" in one_error_line(again, "ndt-chain")
+    assert tree(out) == before
+
+
+def test_a_rerun_of_the_same_command_still_replaces_its_own_result(pair_result, tmp_path):
+    out = _copy(pair_result, tmp_path / "res")
+    scans = copies(tmp_path / "other", "scan_01.laz", "scan_02.laz")
+    res = runner.invoke(register_app, [*map(str, scans), "-o", str(out), "-q"])
+    assert res.exit_code in (0, 1), res.output
+    assert "scan_02.laz" in (out / "result.json").read_text()
+    assert set(tree(out)) == set(tree(pair_result))
