@@ -9,10 +9,11 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from ndt_cli.cli import chain_app, register_app
+from ndt_cli.cli import chain_app, eval_app, register_app
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "sample_data"
+GT = SAMPLE / "poses_T_world_scan.txt"
 runner = CliRunner()
 
 
@@ -90,3 +91,17 @@ def test_a_rerun_of_the_same_command_still_replaces_its_own_result(pair_result, 
     assert res.exit_code in (0, 1), res.output
     assert "scan_02.laz" in (out / "result.json").read_text()
     assert set(tree(out)) == set(tree(pair_result))
+
+
+# --- ndt-eval --out ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("where", ["same", "inside"])
+def test_eval_never_writes_into_the_result_it_reads(pair_result, tmp_path, where):
+    result = _copy(pair_result, tmp_path / "res")
+    before = tree(result)
+    out = result if where == "same" else result / "eval"
+    res = runner.invoke(eval_app, [str(result), "--gt", str(GT), "--out", str(out)])
+    assert res.exit_code == 2, res.output
+    one_error_line(res, "ndt-eval")
+    assert tree(result) == before

@@ -63,7 +63,7 @@ def evaluate_cmd(
         if result_dir is None or gt is None:
             raise InputError("give RESULT_DIR and --gt POSES (see ndt-eval --help)")
         if out is not None:
-            check_out(out)
+            check_out(out, result_dir, gt)
         ev = compare_with_reference(result_dir, gt)
         if out is not None:
             _publish(ev, out)
