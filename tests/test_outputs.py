@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from ndt_cli.cli import chain_app, eval_app, register_app
+from ndt_cli.cli import chain_app, eval_app, export_app, register_app
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "sample_data"
@@ -105,3 +105,24 @@ def test_eval_never_writes_into_the_result_it_reads(pair_result, tmp_path, where
     assert res.exit_code == 2, res.output
     one_error_line(res, "ndt-eval")
     assert tree(result) == before
+
+
+# --- ndt-export onto the scans -------------------------------------------------------------
+
+
+def test_export_onto_an_input_scan_is_refused(pair_result):
+    scan = pair_result.parent / "scans" / "scan_01.laz"
+    before = scan.read_bytes()
+    res = runner.invoke(export_app, [str(pair_result), "--out", str(scan)])
+    assert res.exit_code == 2
+    assert "scan_01.laz" in one_error_line(res, "ndt-export")
+    assert scan.read_bytes() == before
+
+
+def test_per_scan_export_that_would_overwrite_a_scan_is_refused(pair_result):
+    folder = pair_result.parent / "scans"
+    before = tree(folder)
+    res = runner.invoke(export_app, [str(pair_result), "--per-scan", str(folder)])
+    assert res.exit_code == 2
+    one_error_line(res, "ndt-export")
+    assert tree(folder) == before

@@ -143,7 +143,14 @@ def _run(
         check_readable(scans[k].file)
     with _Bar(not quiet) as progress:
         chosen = export_scans(folder, keep, scans, anchor)
-        res = export(chosen, target, voxel=voxel, per_scan_dir=per_scan, progress=progress)
+        res = export(
+            chosen,
+            target,
+            voxel=voxel,
+            per_scan_dir=per_scan,
+            progress=progress,
+            protect=[s.file for s in scans],
+        )
     return {
         "files": [str(p) for p in res.paths],
         "scans": [scans[k].name for k in keep],

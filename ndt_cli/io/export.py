@@ -288,6 +288,27 @@ def per_scan_file_names(names: Sequence[str], suffix: str) -> list[str]:
     return out
 
 
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == b.resolve() or (a.exists() and b.exists() and a.samefile(b))
+    except OSError:
+        return False
+
+
+def refuse_inputs(targets: Sequence[Path], inputs: Sequence[str | Path]) -> None:
+    """Raise :class:`OutputError` when a file to write is one of the ``inputs`` (point files;
+    ``FILE.e57#K`` is the file): an export never replaces what it reads."""
+    from ndt_cli.io.e57 import split_spec
+
+    files = [split_spec(p)[0] for p in inputs]
+    for target in targets:
+        hit = next((f for f in files if _same_file(target, f)), None)
+        if hit is not None:
+            raise OutputError(
+                f"is the scan file {hit}: an export never overwrites its input", target
+            )
+
+
 def _make_sink(
     suffix: str,
     tmp: Path,
@@ -412,6 +433,7 @@ def export(
     per_scan_dir: str | Path | None = None,
     chunk_points: int = CHUNK_POINTS,
     progress: Progress | None = None,
+    protect: Sequence[str | Path] = (),
 ) -> ExportResult:
     """Write the registered cloud of ``scans`` (see the module docstring) and say what was written.
 
@@ -419,7 +441,8 @@ def export(
     ``per_scan_dir``, one file per scan is written into that folder instead, in ``out``'s
     format (``out`` itself is not written). ``voxel``: thinning cube edge in metres (None: keep
     every point). ``chunk_points``: points read and written at a time. ``progress``: called
-    after every chunk with (points read so far, points in all inputs).
+    after every chunk with (points read so far, points in all inputs). ``protect``: more files
+    that must not be written (the scans' own files never are).
 
     Raises :class:`OutputError` (unwritable target, unsupported extension, incompatible extra
     bytes, extent too large) and :class:`InputError` (unreadable input), each one line naming the
@@ -429,13 +452,15 @@ def export(
     suffix = _check(scans, target)
     if voxel is not None and not voxel > 0:
         raise ValueError(f"voxel must be > 0 m, got {voxel}")
-    inputs = _inputs(scans, suffix in (".las", ".laz") or voxel is not None, chunk_points)
-    thinner = None if voxel is None else FirstPointThinner(voxel, *_union_bounds(inputs))
     if per_scan_dir is None:
-        targets, groups = [target], [inputs]
+        targets = [target]
     else:
         names = per_scan_file_names([s.name for s in scans], suffix)
-        targets, groups = [Path(per_scan_dir) / n for n in names], [[i] for i in inputs]
+        targets = [Path(per_scan_dir) / n for n in names]
+    refuse_inputs(targets, [*(s.path for s in scans), *protect])
+    inputs = _inputs(scans, suffix in (".las", ".laz") or voxel is not None, chunk_points)
+    thinner = None if voxel is None else FirstPointThinner(voxel, *_union_bounds(inputs))
+    groups = [inputs] if per_scan_dir is None else [[i] for i in inputs]
     tally = _Tally(total=sum(i.count for i in inputs))
     with _removed_on_failure(None if per_scan_dir is None else Path(per_scan_dir)):
         formats = _write_files(
