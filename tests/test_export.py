@@ -19,7 +19,8 @@ from ndt_cli import sim
 from ndt_cli.core.transforms import pose2d_matrix, translation
 from ndt_cli.errors import InputError, OutputError
 from ndt_cli.io import records
-from ndt_cli.io.export import ExportScan, export, per_scan_file_names
+from ndt_cli.io.export import ExportScan, export
+from ndt_cli.io.names import per_scan_file_names
 
 pytest.importorskip("lazrs")
 

@@ -81,5 +81,7 @@ def _publish(ev: object, out: Path) -> None:
     from ndt_cli.io.outdir import publish
     from ndt_cli.io.serialize import csv_text, to_json
 
-    columns = ("target", "source", "rotation_error_deg", "translation_error_m")
+    columns = ["target", "source", "rotation_error_deg", "translation_error_m"]
+    if any("network" in row for row in ev.links):  # links of a chain carry the network's verdict
+        columns.append("network")
     publish(out, {"eval.csv": csv_text(ev.links, columns), "eval.json": to_json(ev.to_dict())})

@@ -131,18 +131,20 @@ def _run(
     from ndt_cli.errors import InputError
     from ndt_cli.io.export import export
     from ndt_cli.io.points import check_readable
-    from ndt_cli.report.cloud import export_scans, result_scans, select
+    from ndt_cli.report import cloud
 
-    scans, anchor = result_scans(folder)
-    keep, left = select(scans, names.split(",") if names else None, include_suspect)
+    scans, anchor = cloud.result_scans(folder)
+    cfg = cloud.result_config(folder)
+    keep, left = cloud.select(scans, None if names is None else names.split(","), include_suspect)
     for line in left:
         log.warning("left out %s", line)
     if not keep:
         raise InputError("no scan of the result can be exported (see the lines above)", folder)
     for k in keep:
         check_readable(scans[k].file)
+    cloud.check_scan_files(scans, keep)
+    chosen = cloud.export_scans(keep, scans, anchor, cfg)
     with _Bar(not quiet) as progress:
-        chosen = export_scans(folder, keep, scans, anchor)
         res = export(
             chosen,
             target,

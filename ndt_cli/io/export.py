@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import re
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,6 +36,7 @@ import numpy as np
 from ndt_cli.core.arrays import column_bounds
 from ndt_cli.errors import InputError, OutputError
 from ndt_cli.io.atomic import atomic_path
+from ndt_cli.io.names import per_scan_file_names
 from ndt_cli.io.records import CHUNK_POINTS, Chunk, Summary, iter_records, summary
 
 log = logging.getLogger(__name__)
@@ -268,24 +268,6 @@ def _check(scans: Sequence[ExportScan], out: Path) -> str:
 def anchor_of(scans: Sequence[ExportScan]) -> ExportScan:
     """The scan marked ``anchor``, or the first scan."""
     return next((s for s in scans if s.anchor), scans[0])
-
-
-def per_scan_file_names(names: Sequence[str], suffix: str) -> list[str]:
-    """One file name per scan name, safe on every file system and unique (case-insensitively):
-    ``north/scan_1.laz`` -> ``north_scan_1.laz``, ``campaign.e57#2`` -> ``campaign_2.laz``."""
-    from ndt_cli.pipeline.scans import file_stem
-
-    out: list[str] = []
-    taken: set[str] = set()
-    for name in names:
-        stem = re.sub(r"[^A-Za-z0-9._-]+", "_", file_stem(name)).strip("._") or "scan"
-        candidate, k = stem, 1
-        while f"{candidate}{suffix}".lower() in taken:
-            k += 1
-            candidate = f"{stem}_{k}"
-        taken.add(f"{candidate}{suffix}".lower())
-        out.append(f"{candidate}{suffix}")
-    return out
 
 
 def _same_file(a: Path, b: Path) -> bool:

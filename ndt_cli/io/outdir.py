@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import errno
+import hashlib
 import os
 import re
 import shutil
@@ -25,9 +26,10 @@ import uuid
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 
-from ndt_cli.errors import OutputError
+from ndt_cli.errors import InputError, OutputError
 
-MANIFEST = ".ndt-cli-outputs"  # names of the files a run wrote, one per line
+MANIFEST = ".ndt-cli-outputs"  # 'SHA-256  name' of every file a run wrote (sha256sum -c)
+_DIGEST_LINE = re.compile(r"^([0-9a-f]{64})  (.+)$")
 STATE = ("links",)  # folders a later run reuses (--resume): carried over, never dropped
 # what ndt-cli versions without a manifest wrote into an output folder
 KNOWN = re.compile(
@@ -53,14 +55,58 @@ def _entries(folder: Path) -> list[str]:
     return sorted(e.name + ("/" if e.is_dir() else "") for e in folder.iterdir())
 
 
-def listed_outputs(folder: Path) -> list[str] | None:
-    """The names (relative, ``/``-separated) the manifest of ``folder`` lists, or None when the
-    folder has no manifest."""
+def output_digests(folder: Path) -> dict[str, str] | None:
+    """Name (relative, ``/``-separated) -> SHA-256 of every file the manifest of ``folder``
+    lists ('' in a manifest of an older ndt-cli, which lists names only), or None when the
+    folder has no manifest (or it cannot be read)."""
     try:
         text = (folder / MANIFEST).read_text(encoding="utf-8", errors="surrogateescape")
-    except FileNotFoundError:
+    except (OSError, ValueError):
         return None
-    return [line for line in text.splitlines() if line]
+    out = {}
+    for line in filter(None, text.splitlines()):
+        m = _DIGEST_LINE.match(line)
+        out[m[2] if m else line] = m[1] if m else ""
+    return out
+
+
+def listed_outputs(folder: Path) -> list[str] | None:
+    """The names the manifest of ``folder`` lists, or None when it has no manifest."""
+    digests = output_digests(folder)
+    return None if digests is None else list(digests)
+
+
+def sha256_of(path: Path) -> str:
+    """SHA-256 (hex) of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while chunk := fh.read(1 << 20):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def check_unchanged(folder: Path, names: Iterable[str]) -> None:
+    """Raise :class:`InputError` when one of the files ``names`` of a result folder is not
+    what its run wrote: another SHA-256 than the manifest records, or not listed in it. A folder
+    without a manifest (or a manifest without digests) is not checked."""
+    digests = output_digests(folder)
+    if digests is None:
+        return
+    for name in names:
+        path = folder / name
+        if not path.is_file():
+            continue  # reported by the reader, naming what is missing
+        if name not in digests:
+            raise InputError(f"not listed in {MANIFEST}: not written by this result's run", path)
+        try:
+            same = not digests[name] or sha256_of(path) == digests[name]
+        except OSError as exc:
+            raise InputError(f"cannot read ({exc.strerror or exc})", path) from None
+        if not same:
+            raise InputError(
+                f"changed since ndt-cli wrote it (its SHA-256 is not the one in {MANIFEST})",
+                path,
+            )
 
 
 def _walk(folder: Path) -> tuple[list[str], list[str]]:
@@ -214,7 +260,10 @@ def _write(folder: Path, files: Mapping[str, Content]) -> None:
         if callable(content):
             content(path)
         else:
-            data = content.encode("utf-8") if isinstance(content, str) else content
+            # a name that is not valid UTF-8 (a Latin-1 file name) is shown escaped
+            data = (
+                content.encode("utf-8", "backslashreplace") if isinstance(content, str) else content
+            )
             with open(path, "wb") as fh:
                 fh.write(data)
                 fh.flush()
@@ -222,8 +271,8 @@ def _write(folder: Path, files: Mapping[str, Content]) -> None:
 
 
 def _write_manifest(folder: Path) -> None:
-    """List every file of ``folder`` but the resume state in its manifest."""
-    text = "".join(f"{n}\n" for n in sorted(_walk(folder)[0]))
+    """List every file of ``folder`` but the resume state in its manifest, with its SHA-256."""
+    text = "".join(f"{sha256_of(folder / n)}  {n}\n" for n in sorted(_walk(folder)[0]))
     (folder / MANIFEST).write_text(text, encoding="utf-8", errors="surrogateescape")
 
 
@@ -268,5 +317,8 @@ def publish(out: Path, files: Mapping[str, Content], keep_others: bool = False) 
     except OSError as exc:
         shutil.rmtree(tmp, ignore_errors=True)
         raise OutputError(f"cannot write the outputs ({exc.strerror or exc})", out) from None
+    except BaseException:  # a bug or Ctrl-C: no staging folder is left beside the output
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
     with contextlib.suppress(OSError):
         shutil.rmtree(old, ignore_errors=True)
