@@ -67,7 +67,9 @@ RadiusOpt = Annotated[
 ]
 JobsOpt = Annotated[
     int | None,
-    typer.Option("--jobs", "-j", help="Parallel processes.", show_default="all cores"),
+    typer.Option(
+        "--jobs", "-j", help="Parallel processes (at most one per core).", show_default="all cores"
+    ),
 ]
 ResultDirArg = Annotated[
     Path | None, typer.Argument(help="Output folder of ndt-chain or ndt-register.")
