@@ -199,8 +199,12 @@ class FirstPointThinner:
         return mask
 
 
+COLOURS = ("red", "green", "blue")
+
+
 def _first_pass(scan: ExportScan, summ: Summary, chunk_points: int) -> ScanInput:
-    """Count, bounding box (file frame, usable points) and float ranges, from the points."""
+    """Count, bounding box (file frame, usable points) and the ranges of the float attributes
+    and of the colours, from the points."""
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     ranges: dict[str, tuple[float, float]] = {}
     n = 0
@@ -212,7 +216,7 @@ def _first_pass(scan: ExportScan, summ: Summary, chunk_points: int) -> ScanInput
             low, high = column_bounds(pts)
             lo, hi = np.minimum(lo, low), np.maximum(hi, high)
         for name, values in chunk.items():
-            if name in ("x", "y", "z") or values.dtype.kind != "f":
+            if name in ("x", "y", "z") or (values.dtype.kind != "f" and name not in COLOURS):
                 continue
             finite = values[np.isfinite(values)]
             if finite.size:
@@ -228,12 +232,22 @@ def _usable(chunk: Chunk) -> np.ndarray:
     return np.isfinite(x + y + z) & ((x != 0.0) | (y != 0.0) | (z != 0.0))
 
 
-def _inputs(scans: Sequence[ExportScan], need_bounds: bool, chunk_points: int) -> list[ScanInput]:
-    """Summaries of the scans, with a first pass over those whose header lacks what is needed."""
+def _wide_colours(summ: Summary) -> bool:
+    """Whether the file stores colours in more than 8 bits (LAS: 16)."""
+    d = summ.dimension("red")
+    return d is not None and d.dtype.itemsize > 1
+
+
+def _inputs(
+    scans: Sequence[ExportScan], need_bounds: bool, chunk_points: int, need_colours: bool = False
+) -> list[ScanInput]:
+    """Summaries of the scans, with a first pass over those whose header lacks what is needed
+    (``need_colours``: the range of colours stored in more than 8 bits)."""
     out = []
     for scan in scans:
         summ = summary(scan.path)
-        if summ.count is None or (need_bounds and summ.bounds is None):
+        wide = need_colours and _wide_colours(summ)
+        if wide or summ.count is None or (need_bounds and summ.bounds is None):
             out.append(_first_pass(scan, summ, chunk_points))
         else:
             out.append(ScanInput(scan, summ, summ.count, summ.bounds))
@@ -440,7 +454,8 @@ def export(
         names = per_scan_file_names([s.name for s in scans], suffix)
         targets = [Path(per_scan_dir) / n for n in names]
     refuse_inputs(targets, [*(s.path for s in scans), *protect])
-    inputs = _inputs(scans, suffix in (".las", ".laz") or voxel is not None, chunk_points)
+    need_bounds = suffix in (".las", ".laz") or voxel is not None
+    inputs = _inputs(scans, need_bounds, chunk_points, need_colours=suffix == ".e57")
     thinner = None if voxel is None else FirstPointThinner(voxel, *_union_bounds(inputs))
     groups = [inputs] if per_scan_dir is None else [[i] for i in inputs]
     tally = _Tally(total=sum(i.count for i in inputs))
