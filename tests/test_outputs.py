@@ -126,3 +126,23 @@ def test_per_scan_export_that_would_overwrite_a_scan_is_refused(pair_result):
     assert res.exit_code == 2
     one_error_line(res, "ndt-export")
     assert tree(folder) == before
+
+
+def test_temporaries_of_a_killed_export_are_removed_by_the_next(pair_result, tmp_path):
+    import subprocess
+    import sys
+
+    target = tmp_path / "street.laz"
+    code = (
+        "import os, signal, sys\n"
+        "from ndt_cli.io.atomic import atomic_path\n"
+        "with atomic_path(sys.argv[1]) as tmp:\n"
+        "    tmp.write_bytes(b'half a file')\n"
+        "    os.kill(os.getpid(), signal.SIGKILL)\n"
+    )
+    run = subprocess.run([sys.executable, "-c", code, str(target)], check=False)
+    assert run.returncode == -9
+    assert len(list(tmp_path.iterdir())) == 1  # the killed writer's temporary file
+    res = runner.invoke(export_app, [str(pair_result), "--out", str(target), "-q"])
+    assert res.exit_code == 0, res.output
+    assert [p.name for p in tmp_path.iterdir()] == ["street.laz"]

@@ -27,6 +27,7 @@ from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 
 from ndt_cli.errors import InputError, OutputError
+from ndt_cli.io.atomic import pid_alive
 
 MANIFEST = ".ndt-cli-outputs"  # 'SHA-256  name' of every file a run wrote (sha256sum -c)
 _DIGEST_LINE = re.compile(r"^([0-9a-f]{64})  (.+)$")
@@ -197,16 +198,6 @@ def check_output_folder(out: Path, inputs: Iterable[str | Path] = ()) -> Path:
     return real
 
 
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def clean_stale(out: Path) -> None:
     """Remove temporary folders of ``out`` left by runs that were killed."""
     pattern = re.compile(rf"^\.{re.escape(out.name)}\.(tmp|old)-(\d+)-[0-9a-f]+$")
@@ -214,7 +205,7 @@ def clean_stale(out: Path) -> None:
         return
     for entry in out.parent.iterdir():
         m = pattern.match(entry.name)
-        if m and not _pid_alive(int(m.group(2))):
+        if m and not pid_alive(int(m.group(2))):
             shutil.rmtree(entry, ignore_errors=True)
 
 
