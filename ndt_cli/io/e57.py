@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ndt_cli.errors import InputError
+from ndt_cli.errors import InputError, one_line
 
 _SPEC = re.compile(r"^(?P<file>.+\.e57)#(?P<index>\d+)$", re.IGNORECASE)
 
@@ -25,7 +25,8 @@ def split_spec(spec: str | Path) -> tuple[Path, int | None]:
     return (Path(m["file"]), int(m["index"])) if m else (Path(spec), None)
 
 
-def _open(path: Path) -> Any:
+def open_file(path: Path) -> Any:
+    """The E57 file opened with pye57; an InputError naming it when it cannot be."""
     try:
         import pye57
     except ImportError:
@@ -33,14 +34,12 @@ def _open(path: Path) -> Any:
     try:
         return pye57.E57(str(path))
     except Exception as exc:  # libE57 errors are plain exceptions
-        raise InputError(
-            f"not a valid E57 file: {' '.join(str(exc).split())[:160]}", path
-        ) from None
+        raise InputError(f"not a valid E57 file: {one_line(exc)}", path) from None
 
 
 def scan_count(path: str | Path) -> int:
     """Number of scans in an E57 file."""
-    e57 = _open(Path(path))
+    e57 = open_file(Path(path))
     try:
         return int(e57.scan_count)
     finally:
@@ -75,7 +74,8 @@ def header_poses(paths: list[Path]) -> dict[int, np.ndarray]:
     return poses
 
 
-def _index(path: Path, index: int | None, count: int, spec: str) -> int:
+def scan_index(path: Path, index: int | None, count: int, spec: str) -> int:
+    """The index of the scan ``spec`` names among the ``count`` scans of ``path``."""
     if count == 0:
         raise InputError("the E57 file holds no scan", spec)
     if index is None:
@@ -94,9 +94,9 @@ def _index(path: Path, index: int | None, count: int, spec: str) -> int:
 def check_scan(spec: str | Path) -> None:
     """Raise unless the file opens as E57 and holds the scan that ``spec`` names."""
     path, index = split_spec(spec)
-    e57 = _open(path)
+    e57 = open_file(path)
     try:
-        _index(path, index, int(e57.scan_count), str(spec))
+        scan_index(path, index, int(e57.scan_count), str(spec))
     finally:
         e57.close()
 
@@ -104,16 +104,14 @@ def check_scan(spec: str | Path) -> None:
 def read_xyz(spec: str | Path) -> np.ndarray:
     """(N,3) float64 points of one scan, in the scan's own frame (header pose not applied)."""
     path, index = split_spec(spec)
-    e57 = _open(path)
+    e57 = open_file(path)
     try:
-        k = _index(path, index, int(e57.scan_count), str(spec))
+        k = scan_index(path, index, int(e57.scan_count), str(spec))
         data = e57.read_scan(k, transform=False, ignore_missing_fields=True)
     except InputError:
         raise
     except Exception as exc:
-        raise InputError(
-            f"cannot read E57 scan: {' '.join(str(exc).split())[:160]}", spec
-        ) from None
+        raise InputError(f"cannot read E57 scan: {one_line(exc)}", spec) from None
     finally:
         e57.close()
     if "cartesianX" in data:
@@ -129,9 +127,9 @@ def read_xyz(spec: str | Path) -> np.ndarray:
 def header_pose(spec: str | Path) -> np.ndarray | None:
     """The 4x4 pose stored in a scan's header (scan frame to file frame), or None."""
     path, index = split_spec(spec)
-    e57 = _open(path)
+    e57 = open_file(path)
     try:
-        k = _index(path, index, int(e57.scan_count), str(spec))
+        k = scan_index(path, index, int(e57.scan_count), str(spec))
         header = e57.get_header(k)
         if not header.has_pose():
             return None

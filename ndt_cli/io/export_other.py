@@ -206,7 +206,7 @@ def _e57_fields(summary: Summary, imf: Any, e: Any) -> list[tuple[str, str, str,
             out.append((f"color{c}", c.lower(), "u1", e.IntegerNode(imf, 0, 0, 255)))
     if {"row_index", "column_index"} <= names:
         for field, source in (("rowIndex", "row_index"), ("columnIndex", "column_index")):
-            out.append((field, source, "i4", e.IntegerNode(imf, 0, 0, 2**31 - 1)))
+            out.append((field, source, "q", e.IntegerNode(imf, 0, 0, 2**31 - 1)))
     time = next((n for n in ("time_stamp", "gps_time") if n in names), None)
     if time is not None:
         out.append(("timeStamp", time, "f8", e.FloatNode(imf, 0.0, e.E57_DOUBLE)))

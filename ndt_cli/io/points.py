@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ndt_cli.errors import InputError, NdtError
+from ndt_cli.errors import InputError, NdtError, one_line
 from ndt_cli.io.formats import E57Reader, LasReader, PcdReader, PlyReader, PointReader
 from ndt_cli.io.text import TextReader
 
@@ -121,12 +121,6 @@ def check_readable(path: str | Path) -> None:
     p, reader = _open(path)
     with file_errors(p):
         reader.check(p)
-
-
-def one_line(exc: BaseException, limit: int = 160) -> str:
-    """An exception's text on one line, at most ``limit`` characters."""
-    text = " ".join(str(exc).split()) or type(exc).__name__
-    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 @contextmanager
