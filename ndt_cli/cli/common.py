@@ -34,7 +34,8 @@ EXIT_CODES = (
     "130 stopped by Ctrl-C."
 )
 FORMATS = (
-    "Formats: PLY, LAS, LAZ, E57 (FILE.e57#K names scan K), PCD, and text (xyz, txt, csv, 3d: "
+    "Formats: PLY, LAS, LAZ, E57 and PTX (FILE.e57#K, FILE.ptx#K name scan K), PCD, and text "
+    "(xyz, txt, csv, 3d: "
     "the first three columns are x y z)."
 )
 CONFIG_HELP = (

@@ -294,7 +294,7 @@ def _same_file(a: Path, b: Path) -> bool:
 def refuse_inputs(targets: Sequence[Path], inputs: Sequence[str | Path]) -> None:
     """Raise :class:`OutputError` when a file to write is one of the ``inputs`` (point files;
     ``FILE.e57#K`` is the file): an export never replaces what it reads."""
-    from ndt_cli.io.e57 import split_spec
+    from ndt_cli.io.multiscan import split_spec
 
     files = [split_spec(p)[0] for p in inputs]
     for target in targets:

@@ -146,7 +146,7 @@ def _foreign(real: Path) -> list[str]:
 
 def _check_inputs(real: Path, out: Path, inputs: Iterable[str | Path]) -> None:
     """Refuse an output folder that is, holds, or lies inside a file or folder the run reads."""
-    from ndt_cli.io.e57 import split_spec
+    from ndt_cli.io.multiscan import split_spec
 
     for given in inputs:
         path = split_spec(given)[0].resolve()

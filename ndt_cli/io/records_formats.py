@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from ndt_cli.errors import InputError
-from ndt_cli.io.e57 import split_spec
+from ndt_cli.io.multiscan import split_spec
 from ndt_cli.io.records import Chunk, Dimension, Summary
 
 _PLY_TYPES = {
@@ -167,6 +167,42 @@ def pcd_chunks(p: Path, chunk_points: int) -> Iterator[Chunk]:
         yield out
 
 
+# --- PTX -------------------------------------------------------------------------------------
+
+_PTX_COLOURS = ("red", "green", "blue")
+
+
+def _ptx_width(p: Path) -> int:
+    """Numbers per point line of the scan: 4 (x y z intensity) or 7 (and red green blue)."""
+    from ndt_cli.io import ptx
+
+    first = next(ptx.chunks(p, 1), None)
+    return 4 if first is None else first.shape[1]
+
+
+def ptx_summary(p: Path) -> Summary:
+    from ndt_cli.io import ptx
+
+    scan = ptx.scan_of(p)
+    dims = [Dimension("intensity", np.dtype("f4"))]
+    if _ptx_width(p) == 7:
+        dims += [Dimension(c, np.dtype("u1")) for c in _PTX_COLOURS]
+    return Summary(p, "ptx", scan.count, None, tuple(dims), pose=scan.transform)
+
+
+def ptx_chunks(p: Path, chunk_points: int) -> Iterator[Chunk]:
+    """Point lines as read (missing returns ``0 0 0`` included), scanner frame."""
+    from ndt_cli.io import ptx
+
+    for block in ptx.chunks(p, chunk_points):
+        out = {a: np.ascontiguousarray(block[:, k]) for k, a in enumerate(_XYZ)}
+        out["intensity"] = block[:, 3].astype(np.float32)
+        if block.shape[1] == 7:
+            for k, c in enumerate(_PTX_COLOURS):
+                out[c] = np.clip(block[:, 4 + k], 0, 255).astype(np.uint8)
+        yield out
+
+
 # --- text ------------------------------------------------------------------------------------
 
 
@@ -197,12 +233,13 @@ _E57_FIELDS = {  # E57 point field -> (attribute name, buffer type)
 
 def _e57_scan(spec: Path) -> tuple[Any, int]:
     """The open E57 file and the index of the scan ``spec`` names (``FILE.e57#K``)."""
-    from ndt_cli.io.e57 import open_file, scan_index
+    from ndt_cli.io.e57 import open_file
+    from ndt_cli.io.multiscan import which_scan
 
     path, index = split_spec(spec)
     e57 = open_file(path)
     try:
-        return e57, scan_index(path, index, int(e57.scan_count), str(spec))
+        return e57, which_scan(path, index, int(e57.scan_count), str(spec))
     except BaseException:
         e57.close()
         raise

@@ -30,15 +30,15 @@ class ChainInputs:
 
 def campaign_scans(scans: Sequence[str | Path]) -> list[Path]:
     """The scans in campaign order: natural order of their names, each E57 file expanded into
-    its scans (``FILE.e57#K``)."""
-    from ndt_cli.io.e57 import expand
+    its scans (``FILE.e57#K``; PTX files likewise)."""
+    from ndt_cli.io.multiscan import expand
 
     return expand(natural_sort(scans))
 
 
 def refuse_twice(paths: Sequence[Path]) -> None:
     """Raise when two paths name one scan (the same file, or the same scan of one E57)."""
-    from ndt_cli.io.e57 import split_spec
+    from ndt_cli.io.multiscan import split_spec
 
     seen: dict[tuple[Path, int | None], Path] = {}
     for p in paths:

@@ -31,7 +31,7 @@ def natural_sort(paths: Sequence[str | Path]) -> list[Path]:
 
 def file_hash(path: Path) -> str:
     """SHA-256 of a scan's file bytes (and its scan number in an E57); 'missing' if unreadable."""
-    from ndt_cli.io.e57 import split_spec
+    from ndt_cli.io.multiscan import split_spec
 
     file, index = split_spec(path)
     h = hashlib.sha256(b"" if index is None else f"#{index}".encode())

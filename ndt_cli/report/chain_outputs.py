@@ -137,7 +137,7 @@ def link_file_list(result: ChainResult) -> list[str]:
 
 def _header_poses_text(result: ChainResult) -> str | None:
     """The poses stored in E57 scan headers (reported only: registration never uses them)."""
-    from ndt_cli.io.e57 import header_poses
+    from ndt_cli.io.multiscan import header_poses
 
     stored = header_poses(list(result.scans))
     if not stored:
