@@ -400,7 +400,8 @@ def test_per_scan_files_have_unique_names(campaign: Campaign, tmp_path: Path):
         for s, n in zip(campaign.scans, ["north/s.las", "south/s.las", "s.las"], strict=True)
     ]
     result = export(scans, tmp_path / "unused.las", per_scan_dir=tmp_path / "per_scan")
-    assert leftovers(tmp_path / "per_scan") == ["north_s.las", "s.las", "south_s.las"]
+    listed = [".ndt-cli-outputs", "north_s.las", "s.las", "south_s.las"]  # with their manifest
+    assert leftovers(tmp_path / "per_scan") == listed
     assert not (tmp_path / "unused.las").exists()
     for path, f in zip(result.paths, campaign.files, strict=True):
         las, src = laspy.read(path), laspy.read(f)

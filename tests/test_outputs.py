@@ -3,6 +3,7 @@ re-run never removes anything else, and no output is, or overwrites, an input.""
 
 from __future__ import annotations
 
+import os
 import shutil
 from pathlib import Path
 
@@ -146,3 +147,88 @@ def test_temporaries_of_a_killed_export_are_removed_by_the_next(pair_result, tmp
     res = runner.invoke(export_app, [str(pair_result), "--out", str(target), "-q"])
     assert res.exit_code == 0, res.output
     assert [p.name for p in tmp_path.iterdir()] == ["street.laz"]
+
+
+# --- ndt-export: what it writes and what it says ----------------------------------------------
+
+
+def test_a_later_per_scan_export_replaces_the_earlier_files_and_only_those(pair_result, tmp_path):
+    folder = tmp_path / "per_scan"
+    res = runner.invoke(export_app, [str(pair_result), "--per-scan", str(folder), "-q"])
+    assert res.exit_code == 0, res.output
+    (folder / "notes.txt").write_text("mine")
+    res = runner.invoke(export_app, [str(pair_result), "--per-scan", str(folder), "--scans", "0"])
+    assert res.exit_code == 0, res.output
+    assert sorted(p.name for p in folder.iterdir()) == [
+        ".ndt-cli-outputs",
+        "notes.txt",
+        "scan_00.laz",
+    ]
+    (folder / "scan_01.laz").write_text("not an export")  # a file no export wrote
+    res = runner.invoke(export_app, [str(pair_result), "--per-scan", str(folder), "-q"])
+    assert res.exit_code == 2 and "no earlier export wrote it" in one_error_line(res, "ndt-export")
+    assert (folder / "scan_01.laz").read_text() == "not an export"
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["--out", "{tmp}"], "is a folder; --out names the file to write"),
+        (
+            ["--per-scan", "{tmp}/x", "--format", "xyz"],
+            "--format must be las, laz or ply, got 'xyz'",
+        ),
+        (["--per-scan", "{tmp}/file.laz"], "file.laz: exists and is not a folder"),
+        (["--out", "{tmp}/" + "x" * 300 + ".laz"], "the name is longer than 255 bytes"),
+        (["--per-scan", "{tmp}/" + "x" * 300], "the name is longer than 255 bytes"),
+    ],
+)
+def test_output_paths_are_refused_with_what_is_wrong(pair_result, tmp_path, args, needle):
+    (tmp_path / "file.laz").write_text("x")
+    args = [a.replace("{tmp}", str(tmp_path)) for a in args]
+    res = runner.invoke(export_app, [str(pair_result), *args])
+    assert res.exit_code == 2
+    assert needle in one_error_line(res, "ndt-export")
+
+
+@pytest.mark.parametrize("suffix", [".laz", ".e57"])
+def test_a_file_size_limit_during_an_export_is_one_line(pair_result, tmp_path, suffix):
+    import resource
+    import subprocess
+    import sys
+
+    def limit() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (100_000, 100_000))
+
+    out = tmp_path / f"x{suffix}"
+    code = "from ndt_cli.cli import export_app; export_app()"
+    run = subprocess.run(
+        [sys.executable, "-c", code, str(pair_result), "--out", str(out), "-q"],
+        preexec_fn=limit,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    lines = run.stderr.strip().splitlines()
+    assert run.returncode == 2 and len(lines) == 1, run.stderr
+    assert lines[0].startswith(f"ndt-export: error: {out}: cannot write")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(os.geteuid() != 0 or not shutil.which("mount"), reason="needs root")
+def test_an_output_on_a_read_only_file_system_says_so(tmp_path):
+    import subprocess
+
+    mounted = tmp_path / "ro"
+    mounted.mkdir()
+    if subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(mounted)]
+    ).returncode:
+        pytest.skip("cannot mount a file system here")
+    try:
+        scans = [SAMPLE / "scan_00.laz", SAMPLE / "scan_01.laz"]
+        res = runner.invoke(chain_app, [*map(str, scans), "-o", str(mounted / "out"), "-q"])
+        assert res.exit_code == 2
+        assert "(read-only file system)" in one_error_line(res, "ndt-chain")
+    finally:
+        subprocess.run(["umount", str(mounted)], check=True)

@@ -12,7 +12,9 @@ world frame with the scan's ``T_world_file`` and writes, by the extension of ``o
   pose ``T_world_scan`` in the scan header (:mod:`ndt_cli.io.export_other`).
 
 With ``per_scan_dir``, one file per scan is written there instead (in ``out``'s format), named
-after the scan. ``voxel`` thins to one point per cube of the world frame (the first point met:
+after the scan and listed in the folder's manifest (``.ndt-cli-outputs``): a later per-scan
+export into the folder replaces them and removes those it does not write again, and never
+replaces a file that no export wrote there (nor a scan it reads). ``voxel`` thins to one point per cube of the world frame (the first point met:
 scans in the given order, points in file order). Points that are not finite or exactly (0,0,0)
 in the file (no-return points) are dropped, as everywhere in ndt-cli.
 
@@ -34,9 +36,10 @@ from typing import Protocol
 import numpy as np
 
 from ndt_cli.core.arrays import column_bounds
-from ndt_cli.errors import InputError, OutputError
+from ndt_cli.errors import InputError, NdtError, OutputError, one_line
 from ndt_cli.io.atomic import atomic_path
 from ndt_cli.io.names import per_scan_file_names
+from ndt_cli.io.outdir import check_shared_folder, record_shared_folder
 from ndt_cli.io.records import CHUNK_POINTS, Chunk, Summary, iter_records, summary
 
 log = logging.getLogger(__name__)
@@ -415,10 +418,38 @@ def _write_files(
     with contextlib.ExitStack() as stack:
         tmps = [stack.enter_context(atomic_path(t)) for t in targets]
         for tmp, group, t in zip(tmps, groups, targets, strict=True):
-            sink = _make_sink(suffix, tmp, group, anchor, t, chunk_points)
-            _write(sink, group, thinner, tally, chunk_points, progress)
+            with _writing(t):
+                sink = _make_sink(suffix, tmp, group, anchor, t, chunk_points)
+                _write(sink, group, thinner, tally, chunk_points, progress)
             formats.append(getattr(sink, "point_format", None))
     return formats
+
+
+@contextlib.contextmanager
+def _writing(target: Path) -> Iterator[None]:
+    """A failure of the writing library (a full disk, a file-size limit: lazrs and libE57 raise
+    their own errors) as one line naming ``target``; user errors and bugs pass unchanged."""
+    try:
+        yield
+    except NdtError:
+        raise
+    except OSError as exc:
+        raise OutputError(f"cannot write ({exc.strerror or one_line(exc)})", target) from exc
+    except _library_errors() as exc:
+        raise OutputError(f"cannot write ({one_line(exc)}; is the disk full?)", target) from exc
+
+
+def _library_errors() -> tuple[type[Exception], ...]:
+    """What the writing libraries raise: lazrs.LazrsError (a RuntimeError), laspy's errors and
+    libE57's E57Exception (when pye57 is installed)."""
+    from laspy.errors import LaspyException
+
+    errors: tuple[type[Exception], ...] = (RuntimeError, LaspyException)
+    try:
+        from pye57.libe57 import E57Exception
+    except ImportError:
+        return errors
+    return (*errors, E57Exception)
 
 
 def export(
@@ -454,6 +485,8 @@ def export(
         names = per_scan_file_names([s.name for s in scans], suffix)
         targets = [Path(per_scan_dir) / n for n in names]
     refuse_inputs(targets, [*(s.path for s in scans), *protect])
+    if per_scan_dir is not None:
+        check_shared_folder(Path(per_scan_dir), [t.name for t in targets])
     need_bounds = suffix in (".las", ".laz") or voxel is not None
     inputs = _inputs(scans, need_bounds, chunk_points, need_colours=suffix == ".e57")
     thinner = None if voxel is None else FirstPointThinner(voxel, *_union_bounds(inputs))
@@ -463,6 +496,8 @@ def export(
         formats = _write_files(
             suffix, targets, groups, anchor_of(scans), thinner, tally, chunk_points, progress
         )
+        if per_scan_dir is not None:
+            record_shared_folder(Path(per_scan_dir), [t.name for t in targets])
     result = ExportResult(
         paths=tuple(targets),
         points_read=tally.read,

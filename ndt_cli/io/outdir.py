@@ -27,7 +27,7 @@ from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 
 from ndt_cli.errors import InputError, OutputError
-from ndt_cli.io.atomic import pid_alive
+from ndt_cli.io.atomic import atomic_path, pid_alive
 
 MANIFEST = ".ndt-cli-outputs"  # 'SHA-256  name' of every file a run wrote (sha256sum -c)
 _DIGEST_LINE = re.compile(r"^([0-9a-f]{64})  (.+)$")
@@ -192,7 +192,9 @@ def check_output_folder(out: Path, inputs: Iterable[str | Path] = ()) -> Path:
             parent = parent.parent
         writable = os.access(parent, os.W_OK | os.X_OK)
         if not writable or (exists and not os.access(real, os.W_OK | os.X_OK)):
-            raise OutputError("cannot write here (permission denied)", out)
+            read_only = os.statvfs(real if exists else parent).f_flag & os.ST_RDONLY
+            why = "read-only file system" if read_only else "permission denied"
+            raise OutputError(f"cannot write here ({why})", out)
     except PermissionError as exc:
         raise OutputError(f"cannot write here ({exc.strerror})", out) from None
     return real
@@ -313,3 +315,31 @@ def publish(out: Path, files: Mapping[str, Content], keep_others: bool = False) 
         raise
     with contextlib.suppress(OSError):
         shutil.rmtree(old, ignore_errors=True)
+
+
+def check_shared_folder(folder: Path, names: Iterable[str]) -> None:
+    """Raise :class:`OutputError` before files ``names`` are written into ``folder``, a folder
+    that may hold other files (``ndt-export --per-scan``), when one of them would replace a file
+    no earlier such export wrote (its manifest does not list it), or when ``folder`` is the
+    output folder of a run."""
+    listed = output_digests(folder) or {}
+    if set(listed) & {m.rstrip("/") for m in MARKERS}:
+        raise OutputError("is the output folder of a run: choose another folder", folder)
+    for name in names:
+        path = folder / name
+        if (path.exists() or path.is_symlink()) and name not in listed:
+            raise OutputError(
+                "exists and no earlier export wrote it: remove it or choose another folder", path
+            )
+
+
+def record_shared_folder(folder: Path, names: Iterable[str]) -> None:
+    """After files ``names`` were written into ``folder``: remove the files an earlier export
+    wrote there that this one did not, and list this one's files in the folder's manifest."""
+    names = sorted(names)
+    for stale in set(output_digests(folder) or {}) - set(names):
+        with contextlib.suppress(OSError):
+            (folder / stale).unlink()
+    text = "".join(f"{sha256_of(folder / n)}  {n}\n" for n in names)
+    with atomic_path(folder / MANIFEST) as tmp:
+        tmp.write_text(text, encoding="utf-8")
