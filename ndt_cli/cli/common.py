@@ -13,6 +13,7 @@ import contextlib
 import gc
 import logging
 import sys
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Annotated, Any
@@ -127,10 +128,13 @@ def collector_for_a_command() -> Iterator[None]:
 
 def _one_line_main(main: Any, self: Any, args: Any, prog_name: Any, kw: dict) -> Any:
     """Run a click command; a usage error (bad option value, unknown option, unreadable path
-    given to click) is one line on stderr and exit code 2, as every other user error."""
+    given to click) is one line on stderr and exit code 2, as every other user error. Warnings
+    of libraries (numpy's RuntimeWarning on an overflow) are never shown: what they mean is
+    checked and said in ndt-cli's own words."""
     standalone = kw.pop("standalone_mode", True)
     try:
-        with collector_for_a_command():
+        with collector_for_a_command(), warnings.catch_warnings():
+            warnings.simplefilter("ignore")
             value = main(self, args, prog_name, standalone_mode=False, **kw)
     except ClickException as exc:
         if type(exc).__name__ == "NoArgsIsHelpError":  # a bare group command: its help

@@ -14,9 +14,10 @@ world frame with the scan's ``T_world_file`` and writes, by the extension of ``o
 With ``per_scan_dir``, one file per scan is written there instead (in ``out``'s format), named
 after the scan and listed in the folder's manifest (``.ndt-cli-outputs``): a later per-scan
 export into the folder replaces them and removes those it does not write again, and never
-replaces a file that no export wrote there (nor a scan it reads). ``voxel`` thins to one point per cube of the world frame (the first point met:
-scans in the given order, points in file order). Points that are not finite or exactly (0,0,0)
-in the file (no-return points) are dropped, as everywhere in ndt-cli.
+replaces a file that no export wrote there (nor a scan it reads). ``voxel`` thins to one point
+per cube of the world frame (the first point met: scans in the given order, points in file
+order). Points that are not finite or exactly (0,0,0) in the file (no-return points) are
+dropped, as everywhere in ndt-cli.
 
 Memory stays bounded: one chunk of ``chunk_points`` points at a time (a process peaks at about
 0.3-0.4 GB with the default 1 M, whatever the number of points), plus, with ``voxel``, 8 bytes
