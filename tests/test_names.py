@@ -179,3 +179,14 @@ def test_a_failure_while_publishing_leaves_no_staging_folder(tmp_path):
     with pytest.raises(RuntimeError):
         publish(tmp_path / "out", {"a.txt": "a", "b.txt": broken})
     assert list(tmp_path.iterdir()) == []
+
+
+def test_bidi_controls_in_a_name_cannot_reverse_the_report(tmp_path):
+    evil = "b_\u202eevil.laz"
+    files = renamed(tmp_path / "s", {"a.laz": "scan_00.laz", evil: "scan_01.laz"})
+    out = tmp_path / "out"
+    res = runner.invoke(register_app, [*map(str, files), "-o", str(out), "-q"])
+    assert res.exit_code == 0, res.output
+    page = (out / "report.html").read_text(encoding="utf-8")
+    assert not any(c in page for c in "\u202a\u202b\u202c\u202d\u202e\u2066\u2067\u2068\u2069")
+    assert "b_\\u202eevil.laz" in page  # shown, escaped
