@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 
 import numpy as np
 import pytest
@@ -129,6 +130,8 @@ def test_a_scan_from_another_street_is_never_ok_and_the_others_are(street8, tmp_
     assert f"# {files[3].name}: " in (out / "poses.txt").read_text()  # the others, commented
     summary = json.loads((out / "summary.json").read_text())
     assert files[3].name in summary["network"]["scans_not_ok"]
+    for row in rows:  # reasons name links by their scans, never by an index
+        assert not re.search(r"link \d|T_\d+_\d+|links: \d", row["reason"]), row["reason"]
 
 
 @pytest.mark.slow
@@ -237,3 +240,21 @@ def test_memory_grows_with_the_distinct_pairs_not_the_rows(tmp_path):
         tracemalloc.stop()
     assert [(k.target, k.source) for k in links] == [(0, 1), (3, 2)]
     assert peak < f.stat().st_size  # less than the file itself (a list of its rows: ~50x)
+
+
+def test_reasons_name_the_links_by_their_scans():
+    from ndt_cli.report.reasons import named_reason
+
+    names = ("a.laz", "b.laz", "c.laz", "d.laz")
+    used = [(0, 1), (1, 2), (0, 2), (2, 3)]  # the links the adjustment used, in its order
+    assert named_reason("posed only through unused link 2 (T_0_2)", names, used) == (
+        "posed only through unused link a.laz <- c.laz"
+    )
+    assert named_reason("only rejected links: 1, 3", names, used) == (
+        "only rejected links: b.laz <- c.laz, c.laz <- d.laz"
+    )
+    why = "no ok link connects it to the anchor: link 1-3 failed; link 2-3 suspect"
+    assert named_reason(why, names, used) == (
+        "no ok link connects it to the anchor: link b.laz <- d.laz failed; "
+        "link c.laz <- d.laz suspect"
+    )
