@@ -232,3 +232,15 @@ def test_an_output_on_a_read_only_file_system_says_so(tmp_path):
         assert "(read-only file system)" in one_error_line(res, "ndt-chain")
     finally:
         subprocess.run(["umount", str(mounted)], check=True)
+
+
+def test_ndt_watch_never_publishes_into_the_folder_it_watches(tmp_path):
+    from ndt_cli.cli import watch_app
+
+    (tmp_path / "scans").mkdir()
+    for out in (tmp_path / "scans", tmp_path / "scans" / "result"):
+        args = [str(tmp_path / "scans"), "--out", str(out), "--exit-when-idle", "1"]
+        res = runner.invoke(watch_app, args)
+        assert res.exit_code == 2, res.output
+        assert "must not be, hold or lie inside an input" in one_error_line(res, "ndt-watch")
+    assert list((tmp_path / "scans").iterdir()) == []

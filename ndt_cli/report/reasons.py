@@ -11,8 +11,8 @@ from __future__ import annotations
 import re
 from dataclasses import replace
 
-from ndt_cli.pipeline.chain import ChainResult
-from ndt_cli.pipeline.solution import USABLE
+from ndt_cli.pipeline.campaign import ChainResult
+from ndt_cli.pipeline.solution import usable
 
 _VIA = re.compile(r"link (\d+) \(T_(\d+)_(\d+)\)")
 _REJECTED = re.compile(r"(only rejected links: )([\d, ]+)")
@@ -37,7 +37,7 @@ def named_reason(reason: str, names: tuple[str, ...], used: list[tuple[int, int]
 
 def with_named_reasons(result: ChainResult) -> ChainResult:
     """``result`` with every scan's reason naming its links by the scans' names."""
-    used = [(k.target, k.source) for k in result.links if k.status in USABLE]
+    used = [(k.target, k.source) for k in result.links if usable(k)]
     sol = result.solution
     scans = tuple(replace(s, reason=named_reason(s.reason, result.names, used)) for s in sol.scans)
     return replace(result, solution=replace(sol, scans=scans))
