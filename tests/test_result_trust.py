@@ -269,7 +269,9 @@ def test_eval_of_a_chain_writes_its_files_with_the_network_column(chain_result, 
     assert res.exit_code == 0, res.output
     rows = list(csv.DictReader((out / "eval.csv").read_text().splitlines()))
     links = list(csv.DictReader((chain_result / "pairs.csv").read_text().splitlines()))
-    verdicts = {(k["target"], k["source"]): k["network"] for k in links if k["transform_file"]}
+    files = json.loads((chain_result / "summary.json").read_text())["transform_files"]
+    pairs = zip(links, files, strict=True)
+    verdicts = {(k["target"], k["source"]): k["network"] for k, f in pairs if f}
     assert {(r["target"], r["source"]): r["network"] for r in rows} == verdicts
 
 

@@ -77,27 +77,33 @@ class _Results:
     chained: dict[str, np.ndarray]  # T_world_scan along adjacent ok links, not adjusted
 
 
-def _link_file(result_dir: Path, row: dict[str, str], number: int) -> Path | None:
-    """The ``T_target_source`` file of a row of pairs.csv, or None for a link without one."""
-    name = row.get("transform_file")
-    if name is None:  # written before the column: links without a transform have no file
-        f = result_dir / old_link_file_name(row["target"], row["source"])
-        return f if f.is_file() else None
-    if not name:
-        return None
-    if Path(name).name != name or name in (".", ".."):
-        raise InputError(f"line {number}: {name!r} is not a file name", result_dir / "pairs.csv")
-    return result_dir / name
+def _link_files(result_dir: Path, rows: list[dict[str, str]]) -> list[Path | None]:
+    """The ``T_target_source`` file of every row of pairs.csv (None: a link without one), as
+    summary.json lists them, or as results written before that list named them."""
+    summary = result_dir / "summary.json"
+    listed = (
+        read_json_object(summary, "summary").get("transform_files") if summary.exists() else None
+    )
+    if listed is None:
+        files = [result_dir / old_link_file_name(r["target"], r["source"]) for r in rows]
+        return [f if f.is_file() else None for f in files]
+    ok = isinstance(listed, list) and all(isinstance(n, str) for n in listed)
+    if not ok or len(listed) != len(rows):
+        raise InputError("'transform_files' does not list one file per link of pairs.csv", summary)
+    for name in listed:
+        if name and (Path(name).name != name or name in (".", "..")):
+            raise InputError(f"{name!r} is not a file name", summary)
+    return [result_dir / n if n else None for n in listed]
 
 
 def _read_results(result_dir: Path) -> _Results:
     """Links and poses of an ndt-chain or ndt-register folder."""
     pairs_csv = result_dir / "pairs.csv"
     if pairs_csv.exists():
-        check_unchanged(result_dir, ("pairs.csv", "poses.txt", "poses_chain.txt"))
+        check_unchanged(result_dir, ("pairs.csv", "poses.txt", "poses_chain.txt", "summary.json"))
+        rows = read_table(pairs_csv, "pairs", ("target", "source"))
         links = []
-        for number, row in enumerate(read_table(pairs_csv, "pairs", ("target", "source")), 2):
-            f = _link_file(result_dir, row, number)
+        for row, f in zip(rows, _link_files(result_dir, rows), strict=True):
             if f is not None:
                 check_unchanged(result_dir, (f.name,))
                 state = row.get("network") or ""

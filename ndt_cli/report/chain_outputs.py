@@ -35,6 +35,8 @@ def summary(result: ChainResult, runtime_s: float) -> dict[str, Any]:
         "scans": [str(p) for p in result.scans],
         "scan_files": [str(p.resolve()) for p in result.scans],
         "scan_sha256": [file_hash(p) for p in result.scans],
+        "pose_files": dict(zip(result.names, pose_file_list(result), strict=True)),
+        "transform_files": link_file_list(result),
         "anchor": result.anchor,
         "links": len(result.links),
         "ok": statuses.count(Status.OK),
@@ -163,12 +165,11 @@ def _levels(result: ChainResult) -> dict[int, np.ndarray]:
 def chain_files(result: ChainResult, cfg: Config, runtime_s: float) -> dict[str, str]:
     """Every text output of a chain, by file name."""
     names, sol, transforms = result.names, result.solution, link_file_list(result)
-    links = zip(result.links, sol.links, transforms, strict=True)
-    pairs = [pair_row(k, names, f, t) for k, f, t in links]
+    pairs = [pair_row(k, names, f) for k, f in zip(result.links, sol.links, strict=True)]
     level = _levels(result)
-    scans = zip(names, sol.scans, pose_file_list(result), strict=True)
     poses = [
-        pose_row(k, n, s.T_world_scan, s, level.get(k), p) for k, (n, s, p) in enumerate(scans)
+        pose_row(k, n, s.T_world_scan, s, level.get(k))
+        for k, (n, s) in enumerate(zip(names, sol.scans, strict=True))
     ]
     files = {
         "pairs.csv": csv_text(pairs, PAIR_COLUMNS),

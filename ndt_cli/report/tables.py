@@ -83,12 +83,12 @@ PAIR_COLUMNS = _names(
     "link target source",
     _POSE_AND_FIT,
     "degenerate iterations converged runtime_s status reason notes",
-    "kind network residual_deg residual_cm transform_file",
+    "kind network residual_deg residual_cm",
 )
 POSE_COLUMNS = _names(
     "scan file has_pose x y z yaw_deg",
     *(f"m{r}{c}" for r in range(4) for c in range(4)),
-    "status cluster sigma_x_cm sigma_y_cm sigma_z_cm sigma_yaw_deg tilt_deg reason pose_file",
+    "status cluster sigma_x_cm sigma_y_cm sigma_z_cm sigma_yaw_deg tilt_deg reason",
 )
 
 
@@ -105,10 +105,9 @@ def report_row(result: RegistrationResult) -> dict[str, Any]:
     return {"target": result.target, "source": result.source, **metrics(result, REPORT_COLUMNS)}
 
 
-def pair_row(link: Any, names: tuple[str, ...], fit: Any = None, file: str = "") -> dict[str, Any]:
+def pair_row(link: Any, names: tuple[str, ...], fit: Any = None) -> dict[str, Any]:
     """The row of ``pairs.csv`` of a campaign's link (``names``: the scans' names; ``fit``:
-    what the network made of it, a :class:`~ndt_cli.pipeline.solution.LinkFit`; ``file``: the
-    name of its ``T_target_source`` file, empty without one)."""
+    what the network made of it, a :class:`~ndt_cli.pipeline.solution.LinkFit`)."""
     row = {"link": link.index, "target": names[link.target], "source": names[link.source]}
     row.update(metrics(link.result, PAIR_COLUMNS))
     row.update(status=link.status.value, reason=link.reason, kind=link.kind.value)
@@ -116,23 +115,16 @@ def pair_row(link: Any, names: tuple[str, ...], fit: Any = None, file: str = "")
     row["network"] = "" if fit is None else fit.state.value
     row["residual_deg"] = "" if residual is None else num(residual.rotation_deg, 4)
     row["residual_cm"] = "" if residual is None else num(100 * residual.translation_m, 2)
-    row["transform_file"] = file
     return row
 
 
 def pose_row(
-    k: int,
-    name: str,
-    T: np.ndarray | None,
-    scan: Any = None,
-    level: np.ndarray | None = None,
-    file: str = "",
+    k: int, name: str, T: np.ndarray | None, scan: Any = None, level: np.ndarray | None = None
 ) -> dict[str, Any]:
     """The row of ``poses.csv`` of scan ``k``: its name, T_world_scan (empty without one) and,
     from the network (a :class:`~ndt_cli.pipeline.solution.ScanPose`), its status, 1-sigma
     uncertainty and why it is not ok; ``level``: its levelling rotation (its tilt from the
-    vertical), None when no link prepared it; ``file``: the name of its pose file (empty
-    without one)."""
+    vertical), None when no link prepared it."""
     row: dict[str, Any] = {"scan": k, "file": name, "has_pose": str(T is not None).lower()}
     M = T if T is not None else np.full((4, 4), np.nan)
     row.update(x=num(M[0, 3]), y=num(M[1, 3]), z=num(M[2, 3]))
@@ -154,5 +146,4 @@ def pose_row(
         strict=True,
     ):
         row[key] = num(scale * value, digits)
-    row["pose_file"] = file
     return row
