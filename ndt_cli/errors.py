@@ -28,6 +28,18 @@ def read_user_text(path: str | Path, what: str, error: type[NdtError] | None = N
         raise cls(f"cannot read {what} ({reason})", p) from None
 
 
+LIBE57_REPORT = "**** Got an e57 exception"
+"""Start of the debug report libE57 appends to the text of its exceptions (several lines of
+file names, line numbers and internal state): never shown."""
+
+
+def one_line(exc: BaseException, limit: int = 160) -> str:
+    """An exception's text on one line (without libE57's debug report), at most ``limit``
+    characters."""
+    text = " ".join(str(exc).split(LIBE57_REPORT, 1)[0].split()) or type(exc).__name__
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 def caused_by_interrupt(exc: BaseException | None) -> bool:
     """Whether Ctrl-C caused ``exc``: a KeyboardInterrupt, or an error raised while one was
     handled (a compiled module interrupted in its import fails with ImportError)."""

@@ -121,3 +121,35 @@ def test_cli_writes_csv_with_units_and_png(pair, tmp_path):
     assert (out / "score_rotation.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     bad = runner.invoke(analyze_app, ["basin", str(tmp_path / "a.laz"), str(tmp_path / "x.laz")])
     assert bad.exit_code == 2 and "x.laz" in bad.stderr
+
+
+SAMPLE = __import__("pathlib").Path(__file__).resolve().parents[1] / "sample_data"
+
+
+@pytest.mark.parametrize(
+    ("args", "option"),
+    [
+        (["optimizers", "--start", "nan", "0", "0"], "--start dx"),  # was a segfault
+        (["optimizers", "--start", "1e19", "0", "0"], "--start dx"),
+        (["optimizers", "--start", "0", "0", "inf"], "--start dyaw"),
+        (["score-profile", "--step-deg", "0"], "--step-deg"),  # was a ZeroDivisionError
+        (["score-profile", "--step-deg", "nan"], "--step-deg"),
+        (["score-profile", "--cell", "-1"], "--cell"),
+        (["score-profile", "--cell", "0"], "--cell"),
+        (["score-profile", "--translate", "--step", "0"], "--step"),
+        (["score-profile", "--translate", "--x-range", "5", "-5"], "--x-range"),
+        (["score-profile", "--translate", "--x-range", "nan", "1"], "--x-range"),
+        (["score-profile", "--translate", "--x-range", "1e300", "1e300"], "--x-range"),
+        (["basin", "--translation-step", "0"], "--translation-step"),
+        (["basin", "--yaw-step", "0"], "--yaw-step"),
+        (["basin", "--max-translation", "nan"], "--max-translation"),
+        (["basin", "--max-translation", "1e300"], "--max-translation"),
+    ],
+)
+def test_numeric_options_are_checked_before_any_work(tmp_path, args, option):
+    scans = [str(SAMPLE / "scan_00.laz"), str(SAMPLE / "scan_01.laz")]
+    res = runner.invoke(analyze_app, [args[0], *scans, *args[1:], "--out", str(tmp_path / "o")])
+    assert res.exit_code == 2, res.output
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and option in lines[0] and "Traceback" not in res.output
+    assert not (tmp_path / "o").exists()

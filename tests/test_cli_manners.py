@@ -65,7 +65,7 @@ def test_help_lists_every_exit_code_and_format(name):
 
 def test_help_shows_the_defaults():
     text = " ".join(runner.invoke(chain_app, ["--help"]).stdout.split())
-    assert "Parallel processes. [default: (all cores)]" in text
+    assert "Parallel processes (at most one per core). [default: (all cores)]" in text
     assert "[default: ndt_chain]" in text and "[default: local]" in text
 
 

@@ -12,7 +12,9 @@ from pathlib import Path
 
 from conftest import added_task_order, after
 
+from ndt_cli.pipeline.executors import make_executor
 from ndt_cli.pipeline.local_pool import WorkerPool
+from ndt_cli.pipeline.workers import ExecutorKind
 
 
 def _die() -> None:
@@ -68,3 +70,14 @@ def test_closing_waits_for_the_tasks_held_and_cancels_the_rest(tmp_path):
     assert not _manager_threads()
     ran = len(list(tmp_path.iterdir()))
     assert 2 <= ran < 6  # the tasks in the worker's hands finished, the others never started
+
+
+def test_the_local_pool_never_starts_more_processes_than_cores():
+    cores = os.cpu_count() or 1
+    pool = make_executor(ExecutorKind.LOCAL, 100_000)
+    try:
+        assert pool.jobs == cores
+        assert list(pool.run({"a": partial(after, "a", 0.0)})) == [("a", "a")]
+    finally:
+        pool.close()
+    assert make_executor(ExecutorKind.LOCAL, 1).jobs == 1

@@ -19,7 +19,8 @@ from ndt_cli import sim
 from ndt_cli.core.transforms import pose2d_matrix, translation
 from ndt_cli.errors import InputError, OutputError
 from ndt_cli.io import records
-from ndt_cli.io.export import ExportScan, export, per_scan_file_names
+from ndt_cli.io.export import ExportScan, export
+from ndt_cli.io.names import per_scan_file_names
 
 pytest.importorskip("lazrs")
 
@@ -399,7 +400,8 @@ def test_per_scan_files_have_unique_names(campaign: Campaign, tmp_path: Path):
         for s, n in zip(campaign.scans, ["north/s.las", "south/s.las", "s.las"], strict=True)
     ]
     result = export(scans, tmp_path / "unused.las", per_scan_dir=tmp_path / "per_scan")
-    assert leftovers(tmp_path / "per_scan") == ["north_s.las", "s.las", "south_s.las"]
+    listed = [".ndt-cli-outputs", "north_s.las", "s.las", "south_s.las"]  # with their manifest
+    assert leftovers(tmp_path / "per_scan") == listed
     assert not (tmp_path / "unused.las").exists()
     for path, f in zip(result.paths, campaign.files, strict=True):
         las, src = laspy.read(path), laspy.read(f)
@@ -471,3 +473,22 @@ def test_other_formats_records(tmp_path: Path):
     assert records.summary(tmp_path / "p.xyz").count is None
     (c,) = records.iter_records(tmp_path / "p.xyz")
     assert set(c) == {"x", "y", "z"} and np.allclose(c["z"], pts[:, 2])
+
+
+def test_e57_colours_of_16_bit_las_are_judged_from_the_whole_scan(tmp_path: Path):
+    """The first chunk holds 8-bit-looking values, the rest 16-bit ones: every value of the
+    scan is shifted alike (value >> 8), whatever the chunk it comes in."""
+    pye57 = pytest.importorskip("pye57")
+    n = 3000
+    las = laspy.LasData(laspy.LasHeader(point_format=2, version="1.2"))
+    las.header.scales = np.full(3, 0.001)
+    rng = np.random.default_rng(6)
+    las.x, las.y, las.z = (rng.uniform(-10, 10, n) for _ in range(3))
+    colour = np.where(np.arange(n) < 1000, 200, 60000).astype(np.uint16)
+    las.red, las.green, las.blue = colour, colour, colour
+    src = tmp_path / "rgb.las"
+    las.write(str(src))
+    scan = ExportScan(src, "rgb.las", 0, np.eye(4))
+    out = export([scan], tmp_path / "rgb.e57", chunk_points=1000).paths[0]
+    red = pye57.E57(str(out)).read_scan_raw(0)["colorRed"]
+    np.testing.assert_array_equal(red, colour >> 8)

@@ -405,3 +405,24 @@ def test_scans_behind_a_bad_link_get_no_pose(tmp_path):
         k = int(name[5])
         rot, trans = transform_errors(poses[name], np.linalg.inv(truth[0]) @ truth[k])
         assert rot < 0.1 and trans < 0.05, (name, rot, trans)
+
+
+def test_library_warnings_never_reach_the_terminal(tmp_path):
+    """Coordinates that overflow a LAS file's scale: numpy warns while reading them; the command
+    prints its one line, nothing else."""
+    import laspy
+
+    header = laspy.LasHeader(point_format=0, version="1.2")
+    header.scales, header.offsets = np.full(3, 1e300), np.zeros(3)
+    las = laspy.LasData(header)
+    las.X = las.Y = las.Z = np.full(3, 2_000_000_000, np.int32)
+    with pytest.warns(RuntimeWarning):  # laspy's header bounds overflow too
+        las.write(str(tmp_path / "huge.las"))
+    code = "from ndt_cli.cli import register_app; register_app()"
+    args = [str(SAMPLE / "scan_00.laz"), str(tmp_path / "huge.las"), "-o", str(tmp_path / "o")]
+    run = subprocess.run(
+        [sys.executable, "-c", code, *args], capture_output=True, text=True, env=ENV, check=False
+    )
+    lines = run.stderr.strip().splitlines()
+    assert run.returncode == 2 and len(lines) == 1, run.stderr
+    assert "huge.las: no usable points" in lines[0]

@@ -5,7 +5,9 @@ right (ground truth of the simulated street), whatever the config."""
 
 from __future__ import annotations
 
+import json
 import math
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -112,3 +114,128 @@ def test_random_files_are_one_line_and_write_nothing(pair, tmp_path, data, suffi
         lines = res.stderr.strip().splitlines()
         assert len(lines) == 1 and bad.name in lines[0] and "Traceback" not in res.output
         assert not out.exists()
+
+
+# --- damaged result folders through ndt-export and ndt-eval ----------------------------------
+
+SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+GT = SAMPLE / "poses_T_world_scan.txt"
+OPS = ["delete", "truncate", "edit", "swap lines", "another scan", "append"]
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory):
+    """A chain result of three sample scans and a pair result of two (copies in ``scans/``),
+    each scan's usable points in the world of ground truth, and ndt-eval's verdict on them."""
+    from ndt_cli.cli import chain_app, eval_app
+    from ndt_cli.io.matrices import read_pose_list
+
+    root = tmp_path_factory.mktemp("results")
+    (root / "scans").mkdir()
+    names = ["scan_00.laz", "scan_01.laz", "scan_02.laz"]
+    files = [root / "scans" / n for n in names]
+    for f in files:
+        f.write_bytes((SAMPLE / f.name).read_bytes())
+    chain = runner.invoke(chain_app, [*map(str, files), "-o", str(root / "chain"), "-q", "-j", "2"])
+    pair = runner.invoke(register_app, [*map(str, files[:2]), "-o", str(root / "pair"), "-q"])
+    assert chain.exit_code == 0 and pair.exit_code == 0, chain.output + pair.output
+    gt = read_pose_list(GT)
+    world = []
+    for f in files:
+        pts = io.read(f).points
+        T = np.linalg.inv(gt[names[0]]) @ gt[f.name]
+        world.append(pts @ T[:3, :3].T + T[:3, 3])
+    evals = {}
+    for kind in ("chain", "pair"):
+        res = runner.invoke(eval_app, [str(root / kind), "--gt", str(GT), "--json"])
+        assert res.exit_code == 0, res.output
+        evals[kind] = json.loads(res.stdout)
+    return root, files, world, evals
+
+
+def _mutate(path: Path, op: str, where: float, data: bytes, other: Path) -> None:
+    """Damage one file as a careless user, a full disk or an editor would."""
+    if op == "delete":
+        path.unlink()
+        return
+    raw = path.read_bytes()
+    at = int(where * len(raw))
+    if op == "truncate":
+        raw = raw[:at]
+    elif op == "edit":
+        raw = raw[:at] + data + raw[at + len(data) :]
+    elif op == "swap lines":
+        lines = raw.split(b"\n")
+        i, j = int(where * (len(lines) - 1)), len(lines) - 1 - int(where * (len(lines) - 1))
+        lines[i], lines[j] = lines[j], lines[i]
+        raw = b"\n".join(lines)
+    elif op == "another scan":
+        raw = other.read_bytes()
+    else:
+        raw += data
+    path.write_bytes(raw)
+
+
+def _cloud_is_right(ply: Path, world: list[np.ndarray], scans: list[str]) -> None:
+    """Every exported scan holds its scan's points where ground truth puts them."""
+    import plyfile
+
+    v = plyfile.PlyData.read(str(ply))["vertex"].data
+    xyz = np.column_stack([v["x"], v["y"], v["z"]])
+    for k in {int(s) for s in v["scan_index"]}:
+        mine = xyz[v["scan_index"] == k]
+        assert len(mine) == len(world[k]), (scans, k)
+        assert np.linalg.norm(mine.mean(axis=0) - world[k].mean(axis=0)) < 0.05, (scans, k)
+
+
+def _one_line_or_ok(res, prog: str) -> None:
+    assert res.exit_code in (0, 1, 2), res.output
+    assert "Traceback" not in res.output and isinstance(res.exception, SystemExit | type(None))
+    if res.exit_code:
+        lines = res.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith(f"{prog}: error:"), lines
+
+
+@pytest.mark.slow
+@settings(max_examples=30, deadline=None, suppress_health_check=list(HealthCheck))
+@given(
+    kind=st.sampled_from(["chain", "pair"]),
+    pick=st.floats(0, 1, exclude_max=True),
+    op=st.sampled_from(OPS),
+    where=st.floats(0, 1),
+    data=st.binary(min_size=1, max_size=12),
+)
+def test_a_damaged_result_is_exported_right_or_refused_in_one_line(
+    results, tmp_path, kind, pick, op, where, data
+):
+    from ndt_cli.cli import eval_app, export_app
+
+    root, scans, world, evals = results
+    here = Path(tempfile.mkdtemp(dir=tmp_path))
+    folder = here / kind
+    shutil.copytree(root / kind, folder)
+    targets = sorted(p for p in folder.rglob("*") if p.is_file()) + scans
+    target = targets[int(pick * len(targets))]
+    kept = {f: f.read_bytes() for f in scans}
+    try:
+        _mutate(
+            target,
+            op,
+            where,
+            data,
+            scans[(scans.index(target) + 1) % 3] if target in scans else scans[0],
+        )
+        out = here / "cloud.ply"
+        res = runner.invoke(export_app, [str(folder), "--out", str(out), "-q", "--json"])
+        _one_line_or_ok(res, "ndt-export")
+        if res.exit_code == 0:  # never a wrong cloud with exit 0
+            _cloud_is_right(out, world, json.loads(res.stdout)["scans"])
+        else:
+            assert not out.exists()
+        res = runner.invoke(eval_app, [str(folder), "--gt", str(GT), "--json"])
+        _one_line_or_ok(res, "ndt-eval")
+        if res.exit_code == 0:  # never another verdict than the result's own
+            assert json.loads(res.stdout) == evals[kind], (target, op)
+    finally:
+        for f, raw in kept.items():
+            f.write_bytes(raw)

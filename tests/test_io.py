@@ -18,6 +18,7 @@ from ndt_cli import io as ndt_io
 from ndt_cli.errors import InputError, OutputError
 from ndt_cli.io import formats
 from ndt_cli.io.formats import LasReader
+from ndt_cli.io.multiscan import expand
 from ndt_cli.io.points import READERS
 
 ALL_SUFFIXES = (".ply", ".las", ".laz", ".pcd", ".xyz", ".txt", ".csv")
@@ -484,7 +485,8 @@ def test_write_rejects_unknown_extension_and_bad_shape(tmp_path: Path) -> None:
 
 def test_readers_and_suffixes() -> None:
     assert all(isinstance(r, formats.PointReader) for r in READERS)
-    assert set(ndt_io.SUPPORTED_SUFFIXES) == {*ALL_SUFFIXES, ".e57", ".3d"}  # read-only here
+    read_only = {".e57", ".ptx", ".3d"}
+    assert set(ndt_io.SUPPORTED_SUFFIXES) == {*ALL_SUFFIXES, *read_only}
     assert set(ndt_io.WRITE_SUFFIXES) == set(ALL_SUFFIXES)
 
 
@@ -522,7 +524,7 @@ def test_e57_scans_are_read_by_number_and_header_poses_reported(tmp_path: Path) 
     pose[:3, 3] = [10.0, -5.0, 1.5]
     path = tmp_path / "campaign.e57"
     e57.write(path, scans, [pose, None])
-    assert e57.expand([path]) == [Path(f"{path}#0"), Path(f"{path}#1")]
+    assert expand([path]) == [Path(f"{path}#0"), Path(f"{path}#1")]
     for k in range(2):
         cloud = ndt_io.read(f"{path}#{k}")
         np.testing.assert_allclose(cloud.points, scans[k], atol=1e-5)  # own frame: pose not applied

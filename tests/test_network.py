@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 
 import numpy as np
 import pytest
@@ -129,6 +130,8 @@ def test_a_scan_from_another_street_is_never_ok_and_the_others_are(street8, tmp_
     assert f"# {files[3].name}: " in (out / "poses.txt").read_text()  # the others, commented
     summary = json.loads((out / "summary.json").read_text())
     assert files[3].name in summary["network"]["scans_not_ok"]
+    for row in rows:  # reasons name links by their scans, never by an index
+        assert not re.search(r"link \d|T_\d+_\d+|links: \d", row["reason"]), row["reason"]
 
 
 @pytest.mark.slow
@@ -197,3 +200,61 @@ def test_no_adjust_with_one_neighbour_is_the_classic_chain(street8, tmp_path):
         for link in result.links[:k]:
             expected = expected @ link.T_target_source
         np.testing.assert_array_equal(T, expected)
+
+
+NAMES = ["scan_0.laz", "scan_1.laz", "scan_2.laz", "scan_3.laz"]
+
+
+@pytest.mark.parametrize(
+    ("text", "needle"),
+    [
+        ("scan_0.laz,scan_3.lz\n", r"line 1: no scan named 'scan_3\.lz'"),  # a typo
+        ("0,4\n", r"line 1: no scan with index 4 \(0\.\.3\)"),
+        ("0,\u00b2\n", "line 1: no scan named '\u00b2'"),  # int() refuses superscript digits
+        ("0,1\n2,\u2461\n", "line 2: no scan named '\u2461'"),
+    ],
+)
+def test_a_first_row_that_names_no_scan_is_an_error_not_a_header(tmp_path, text, needle):
+    f = tmp_path / "pairs.csv"
+    f.write_text(text, encoding="utf-8")
+    with pytest.raises(InputError, match=needle):
+        read_pairs(f, NAMES)
+
+
+def test_a_byte_order_mark_before_the_first_pair_is_read(tmp_path):
+    f = tmp_path / "pairs.csv"
+    f.write_bytes(b"\xef\xbb\xbf0,3\n")  # Excel's "CSV UTF-8"
+    assert [(k.target, k.source) for k in read_pairs(f, NAMES)] == [(0, 3)]
+
+
+def test_memory_grows_with_the_distinct_pairs_not_the_rows(tmp_path):
+    import tracemalloc
+
+    f = tmp_path / "pairs.csv"
+    f.write_text("0,1\n3,2\n" * 250_000)  # 2 MB, two distinct pairs
+    tracemalloc.start()
+    try:
+        links = read_pairs(f, NAMES)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert [(k.target, k.source) for k in links] == [(0, 1), (3, 2)]
+    assert peak < f.stat().st_size  # less than the file itself (a list of its rows: ~50x)
+
+
+def test_reasons_name_the_links_by_their_scans():
+    from ndt_cli.report.reasons import named_reason
+
+    names = ("a.laz", "b.laz", "c.laz", "d.laz")
+    used = [(0, 1), (1, 2), (0, 2), (2, 3)]  # the links the adjustment used, in its order
+    assert named_reason("posed only through unused link 2 (T_0_2)", names, used) == (
+        "posed only through unused link a.laz <- c.laz"
+    )
+    assert named_reason("only rejected links: 1, 3", names, used) == (
+        "only rejected links: b.laz <- c.laz, c.laz <- d.laz"
+    )
+    why = "no ok link connects it to the anchor: link 1-3 failed; link 2-3 suspect"
+    assert named_reason(why, names, used) == (
+        "no ok link connects it to the anchor: link b.laz <- d.laz failed; "
+        "link c.laz <- d.laz suspect"
+    )

@@ -25,7 +25,7 @@ from ndt_cli import config, io, sim
 from ndt_cli.cli import chain_app, register_app
 from ndt_cli.core.transforms import transform_errors
 from ndt_cli.errors import ConfigError, InputError, UserInterruptError
-from ndt_cli.io.matrices import read_matrix
+from ndt_cli.io.matrices import read_matrix, read_pose_list
 from ndt_cli.ndt.result import Status
 from ndt_cli.pipeline.chain import NetworkOptions, run_chain
 from ndt_cli.pipeline.local_pool import WorkerPool
@@ -399,3 +399,37 @@ def test_config_is_valid_or_a_config_error(data):
             b < a for a, b in zip(cfg.grid.cell_sizes, cfg.grid.cell_sizes[1:], strict=False)
         )
         assert cfg.slices.thickness > 0
+
+
+def _damage_links(out: Path, how: str) -> int:
+    """Damage the transform of every link file of ``out/links``; how many were damaged."""
+    damaged = 0
+    for link in sorted((out / "links").glob("*.json")):
+        data = json.loads(link.read_text())
+        if not isinstance(data, dict) or not (data.get("result") or {}).get("T_target_source"):
+            continue
+        T = np.array(data["result"]["T_target_source"])
+        if how == "nan":
+            T[0, 3] = np.nan
+        else:
+            T[:3, :3] *= 3.0
+        data["result"]["T_target_source"] = T.tolist()
+        link.write_text(json.dumps(data))
+        damaged += 1
+    return damaged
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("how", ["nan", "scaled rotation"])
+def test_damaged_resume_state_is_recomputed(tmp_path, how):
+    sample = Path(__file__).resolve().parents[1] / "sample_data"
+    files = [str(sample / "scan_00.laz"), str(sample / "scan_01.laz")]
+    out = tmp_path / "out"
+    first = CliRunner().invoke(chain_app, [*files, "-o", str(out), "-q", "-j", "1"])
+    assert first.exit_code == 0, first.output
+    before = read_pose_list(out / "poses.txt")
+    assert _damage_links(out, how) >= 1
+    res = CliRunner().invoke(chain_app, [*files, "-o", str(out), "-q", "-j", "1", "--resume"])
+    assert res.exit_code == 0, res.output
+    after = read_pose_list(out / "poses.txt")
+    np.testing.assert_allclose(after["scan_01.laz"], before["scan_01.laz"], atol=1e-9)

@@ -7,8 +7,6 @@ link's T_target_source: rotation angle (degrees) and translation (metres) of the
 
 from __future__ import annotations
 
-import csv
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -16,9 +14,12 @@ from typing import Any
 import numpy as np
 
 from ndt_cli.core.transforms import transform_errors
-from ndt_cli.errors import InputError, read_user_text
-from ndt_cli.io.matrices import named_rows, read_matrix, read_pose_list
-from ndt_cli.pipeline.scans import link_file_name
+from ndt_cli.errors import InputError
+from ndt_cli.io.matrices import named_rows, read_matrix, read_pose_list, rigid_problem
+from ndt_cli.io.names import old_link_file_name
+from ndt_cli.io.outdir import check_unchanged
+from ndt_cli.io.serialize import read_json_object, read_table
+from ndt_cli.pipeline.scans import scan_names
 
 DEFAULT_THRESHOLDS = ((2.0, 0.10), (0.1, 0.02))  # (degrees, metres)
 
@@ -45,22 +46,27 @@ class Evaluation:
 def read_reference(
     path: str | Path,
 ) -> tuple[dict[str, np.ndarray], dict[tuple[str, str], np.ndarray]]:
-    """(poses by scan name, relative transforms by (target, source)) from a reference file."""
+    """(poses by scan name, relative transforms by (target, source)) from a reference file;
+    every matrix must be a rigid transform."""
     p = Path(path)
     poses: dict[str, np.ndarray] = {}
     pairs: dict[tuple[str, str], np.ndarray] = {}
     for n, fields in named_rows(p, "reference"):
         try:
-            if len(fields) == 17:
-                poses[fields[0]] = np.array(fields[1:], dtype=float).reshape(4, 4)
-            elif len(fields) == 18:
-                pairs[(fields[0], fields[1])] = np.array(fields[2:], dtype=float).reshape(4, 4)
-            else:
+            if len(fields) not in (17, 18):
                 raise ValueError
+            T = np.array(fields[len(fields) - 16 :], dtype=float).reshape(4, 4)
         except ValueError:
             raise InputError(
                 f"line {n}: expected 'name' or 'target source', then 16 numbers", p
             ) from None
+        problem = rigid_problem(T)
+        if problem:
+            raise InputError(f"line {n}: {problem}", p)
+        if len(fields) == 17:
+            poses[fields[0]] = T
+        else:
+            pairs[(fields[0], fields[1])] = T
     return poses, pairs
 
 
@@ -71,24 +77,48 @@ class _Results:
     chained: dict[str, np.ndarray]  # T_world_scan along adjacent ok links, not adjusted
 
 
+def _link_files(result_dir: Path, rows: list[dict[str, str]]) -> list[Path | None]:
+    """The ``T_target_source`` file of every row of pairs.csv (None: a link without one), as
+    summary.json lists them, or as results written before that list named them."""
+    summary = result_dir / "summary.json"
+    listed = (
+        read_json_object(summary, "summary").get("transform_files") if summary.exists() else None
+    )
+    if listed is None:
+        files = [result_dir / old_link_file_name(r["target"], r["source"]) for r in rows]
+        return [f if f.is_file() else None for f in files]
+    ok = isinstance(listed, list) and all(isinstance(n, str) for n in listed)
+    if not ok or len(listed) != len(rows):
+        raise InputError("'transform_files' does not list one file per link of pairs.csv", summary)
+    for name in listed:
+        if name and (Path(name).name != name or name in (".", "..")):
+            raise InputError(f"{name!r} is not a file name", summary)
+    return [result_dir / n if n else None for n in listed]
+
+
 def _read_results(result_dir: Path) -> _Results:
     """Links and poses of an ndt-chain or ndt-register folder."""
     pairs_csv = result_dir / "pairs.csv"
     if pairs_csv.exists():
+        check_unchanged(result_dir, ("pairs.csv", "poses.txt", "poses_chain.txt", "summary.json"))
+        rows = read_table(pairs_csv, "pairs", ("target", "source"))
         links = []
-        with open(pairs_csv, encoding="utf-8") as fh:
-            for row in csv.DictReader(fh):
-                f = result_dir / link_file_name(row["target"], row["source"])
-                if f.exists():
-                    state = row.get("network", "")
-                    links.append((row["target"], row["source"], read_matrix(f), state))
+        for row, f in zip(rows, _link_files(result_dir, rows), strict=True):
+            if f is not None:
+                check_unchanged(result_dir, (f.name,))
+                state = row.get("network") or ""
+                links.append((row["target"], row["source"], read_matrix(f), state))
         return _Results(
             links, _poses(result_dir / "poses.txt"), _poses(result_dir / "poses_chain.txt")
         )
     single = result_dir / "T_target_source.txt"
     if single.exists():
-        meta = json.loads(read_user_text(result_dir / "result.json", "result"))
-        names = [Path(meta["target"]).name, Path(meta["source"]).name]
+        check_unchanged(result_dir, ("T_target_source.txt", "result.json"))
+        meta = read_json_object(result_dir / "result.json", "result")
+        ends = [meta.get("target"), meta.get("source")]
+        if not all(isinstance(e, str) and e for e in ends):
+            raise InputError("no 'target' and 'source' scan names", result_dir / "result.json")
+        names = scan_names([Path(e) for e in ends])
         return _Results([(names[0], names[1], read_matrix(single), "")], {}, {})
     raise InputError(
         "no ndt-chain (pairs.csv) or ndt-register (T_target_source.txt) results", result_dir

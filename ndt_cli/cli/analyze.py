@@ -45,11 +45,44 @@ def _analysis(target: Path, source: Path, config: str | None, at: Path | None, o
     from ndt_cli.io.matrices import read_matrix
     from ndt_cli.ndt.prepare import load_and_prepare
 
-    check_out(out)
+    check_out(out, target, source, at, config)
     cfg = load(config)
     T = read_matrix(at) if at is not None else None
     pair = Pair.make(load_and_prepare(target, cfg), load_and_prepare(source, cfg), cfg, T)
     return cfg, pair
+
+
+MAX_SHIFT = 1e4  # m: the largest shift or range an experiment takes
+MAX_POSES = 200_000  # poses an experiment evaluates at most
+
+
+def _within(option: str, value: float, lo: float, hi: float, above: bool = False) -> None:
+    """Raise a ConfigError unless ``lo <= value <= hi`` (``lo < value`` with ``above``)."""
+    from ndt_cli.errors import ConfigError
+
+    low_ok = value > lo if above else value >= lo
+    if not (low_ok and value <= hi):  # NaN fails both
+        side = "above" if above else "at least"
+        raise ConfigError(f"--{option} must be {side} {lo:g} and at most {hi:g}, got {value}")
+
+
+def _grid(option: str, span: tuple[float, float], step: float, step_option: str) -> int:
+    """The number of values from ``span[0]`` to ``span[1]`` in ``step``, checked."""
+    from ndt_cli.errors import ConfigError
+
+    for v in span:
+        _within(option, v, -MAX_SHIFT, MAX_SHIFT)
+    if not span[0] <= span[1]:
+        raise ConfigError(f"--{option} must go from low to high, got {span[0]} {span[1]}")
+    _within(step_option, step, 0.0, MAX_SHIFT, above=True)
+    return int((span[1] - span[0]) / step) + 1
+
+
+def _at_most(poses: int) -> None:
+    from ndt_cli.errors import ConfigError
+
+    if poses > MAX_POSES:
+        raise ConfigError(f"the options ask for {poses} poses, at most {MAX_POSES}: larger steps")
 
 
 def _table(rows: list[dict]) -> str:
@@ -106,6 +139,11 @@ def score_profile(
         from ndt_cli.analysis import experiments as analyze
         from ndt_cli.report import plots
 
+        _within("cell", cell, 0.1, 100.0)
+        _within("step-deg", step_deg, 0.0, 180.0, above=True)
+        if translate:
+            nx = _grid("x-range", x_range, step, "step")
+            _at_most(nx * _grid("y-range", y_range, step, "step"))
         cfg, pair = _analysis(target, source, config, at, out)
         files: Files = {}
         if rotate:
@@ -142,6 +180,12 @@ def basin_cmd(
         from ndt_cli.analysis import experiments as analyze
         from ndt_cli.report import plots
 
+        n = _grid("max-translation", (0.0, max_translation), translation_step, "translation-step")
+        _within("max-yaw", max_yaw, 0.0, 180.0)
+        _within("yaw-step", yaw_step, 0.0, 360.0, above=True)
+        _at_most((2 * n - 1) ** 2 * (2 * int(max_yaw / yaw_step) + 1))
+        if jobs is not None:
+            _within("jobs", jobs, 1, 1e9)
         cfg, pair = _analysis(target, source, config, at, out)
         offsets = analyze.basin_offsets(max_translation, translation_step, max_yaw, yaw_step)
         rows = analyze.basin(pair, cfg, offsets, jobs=jobs)
@@ -174,6 +218,9 @@ def optimizers_cmd(
         from ndt_cli.analysis import experiments as analyze
         from ndt_cli.report import plots
 
+        limits = (("start dx", MAX_SHIFT), ("start dy", MAX_SHIFT), ("start dyaw", 360.0))
+        for (option, limit), value in zip(limits, start, strict=True):
+            _within(option, value, -limit, limit)
         cfg, pair = _analysis(target, source, config, at, out)
         cells = cfg.grid.cell_sizes
         lm_cells = cells[1:] if len(cells) > 1 else cells

@@ -120,7 +120,7 @@ def chain(
             radius=radius,
             pairs=pairs,
         )
-        check_out(out)
+        check_out(out, *inputs.paths, pairs, config)
         result, runtime = _run(inputs, cfg, opts)
     _show(result, runtime, out, json_out, quiet)
     if not result.ok:
@@ -157,6 +157,7 @@ def _run(inputs: ChainInputs, cfg: Config, opts: _Options) -> tuple[ChainResult,
     from ndt_cli.pipeline.executors import make_executor
     from ndt_cli.pipeline.inputs import expected_links
     from ndt_cli.report.chain_outputs import write_chain_outputs
+    from ndt_cli.report.reasons import with_named_reasons
 
     t0 = time.perf_counter()
     pool = make_executor(opts.executor, opts.jobs, opts.scheduler)
@@ -174,6 +175,7 @@ def _run(inputs: ChainInputs, cfg: Config, opts: _Options) -> tuple[ChainResult,
             on_progress=advance,
         )
     runtime = time.perf_counter() - t0
+    result = with_named_reasons(result)
     write_chain_outputs(opts.out, result, cfg, runtime)
     return result, runtime
 

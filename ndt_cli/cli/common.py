@@ -13,6 +13,7 @@ import contextlib
 import gc
 import logging
 import sys
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Annotated, Any
@@ -34,7 +35,8 @@ EXIT_CODES = (
     "130 stopped by Ctrl-C."
 )
 FORMATS = (
-    "Formats: PLY, LAS, LAZ, E57 (FILE.e57#K names scan K), PCD, and text (xyz, txt, csv, 3d: "
+    "Formats: PLY, LAS, LAZ, E57 and PTX (FILE.e57#K, FILE.ptx#K name scan K), PCD, and text "
+    "(xyz, txt, csv, 3d: "
     "the first three columns are x y z)."
 )
 CONFIG_HELP = (
@@ -67,7 +69,9 @@ RadiusOpt = Annotated[
 ]
 JobsOpt = Annotated[
     int | None,
-    typer.Option("--jobs", "-j", help="Parallel processes.", show_default="all cores"),
+    typer.Option(
+        "--jobs", "-j", help="Parallel processes (at most one per core).", show_default="all cores"
+    ),
 ]
 ResultDirArg = Annotated[
     Path | None, typer.Argument(help="Output folder of ndt-chain or ndt-register.")
@@ -124,10 +128,13 @@ def collector_for_a_command() -> Iterator[None]:
 
 def _one_line_main(main: Any, self: Any, args: Any, prog_name: Any, kw: dict) -> Any:
     """Run a click command; a usage error (bad option value, unknown option, unreadable path
-    given to click) is one line on stderr and exit code 2, as every other user error."""
+    given to click) is one line on stderr and exit code 2, as every other user error. Warnings
+    of libraries (numpy's RuntimeWarning on an overflow) are never shown: what they mean is
+    checked and said in ndt-cli's own words."""
     standalone = kw.pop("standalone_mode", True)
     try:
-        with collector_for_a_command():
+        with collector_for_a_command(), warnings.catch_warnings():
+            warnings.simplefilter("ignore")
             value = main(self, args, prog_name, standalone_mode=False, **kw)
     except ClickException as exc:
         if type(exc).__name__ == "NoArgsIsHelpError":  # a bare group command: its help
@@ -266,8 +273,10 @@ def console(stderr: bool = False) -> object:
     return Console(file=stream, width=None if stream.isatty() else 10_000, soft_wrap=True)
 
 
-def check_out(out: Path) -> Path:
-    """The output folder, checked before any work: new, empty, or an earlier result."""
+def check_out(out: Path, *inputs: Path | str | None) -> Path:
+    """The output folder, checked before any work: new, empty, or an earlier result, and
+    neither one of the run's ``inputs`` (files and folders it reads; None and names that are
+    no file, such as a shipped config's, are skipped) nor holding or inside one."""
     from ndt_cli.io.outdir import check_output_folder
 
-    return check_output_folder(out)
+    return check_output_folder(out, [Path(p) for p in inputs if p is not None])

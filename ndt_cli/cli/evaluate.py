@@ -63,7 +63,7 @@ def evaluate_cmd(
         if result_dir is None or gt is None:
             raise InputError("give RESULT_DIR and --gt POSES (see ndt-eval --help)")
         if out is not None:
-            check_out(out)
+            check_out(out, result_dir, gt)
         ev = compare_with_reference(result_dir, gt)
         if out is not None:
             _publish(ev, out)
@@ -81,5 +81,7 @@ def _publish(ev: object, out: Path) -> None:
     from ndt_cli.io.outdir import publish
     from ndt_cli.io.serialize import csv_text, to_json
 
-    columns = ("target", "source", "rotation_error_deg", "translation_error_m")
+    columns = ["target", "source", "rotation_error_deg", "translation_error_m"]
+    if any("network" in row for row in ev.links):  # links of a chain carry the network's verdict
+        columns.append("network")
     publish(out, {"eval.csv": csv_text(ev.links, columns), "eval.json": to_json(ev.to_dict())})

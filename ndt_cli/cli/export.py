@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated
@@ -102,20 +103,36 @@ def _targets(
         raise ConfigError("give either --out FILE or --per-scan FOLDER")
     if voxel is not None and not 0.001 <= voxel <= 100:
         raise ConfigError(f"--voxel must be between 0.001 and 100 m, got {voxel}")
-    target = out if out is not None else Path(f"scan.{fmt.lower().lstrip('.')}")
-    if target.suffix.lower() not in _FORMATS:
+    kind = fmt.lower().lstrip(".")
+    if per_scan is not None and kind == "e57":
+        raise ConfigError("--per-scan writes las, laz or ply; E57 holds every scan in one file")
+    if per_scan is not None and f".{kind}" not in _FORMATS:
+        raise ConfigError(f"--format must be las, laz or ply, got {fmt!r}")
+    try:
+        _check_place(out if out is not None else per_scan, per_scan is not None)
+    except OSError as exc:
+        raise OutputError(f"cannot write here ({exc.strerror or exc})", out or per_scan) from None
+    return (out if out is not None else Path(f"scan.{kind}")), per_scan
+
+
+def _check_place(path: Path, folder: bool) -> None:
+    """The file (or the folder, ``folder``) to write: a legal name of the right kind."""
+    from ndt_cli.errors import OutputError
+
+    if len(os.fsencode(path.name)) > 255:
+        raise OutputError("the name is longer than 255 bytes", path)
+    if folder and path.exists() and not path.is_dir():
+        raise OutputError("exists and is not a folder; --per-scan names a folder", path)
+    if not folder and path.is_dir():
+        raise OutputError("is a folder; --out names the file to write", path)
+    if not folder and path.suffix.lower() not in _FORMATS:
         kinds = " ".join(_FORMATS)
         raise OutputError(
-            f"cannot write {target.suffix or 'no extension'!r}; writable: {kinds}", target
+            f"cannot write {path.suffix or 'a file without extension'!r}; writable: {kinds}", path
         )
-    if per_scan is not None and target.suffix.lower() == ".e57":
-        raise ConfigError("--per-scan writes las, laz or ply; E57 holds every scan in one file")
-    if out is not None and out.is_dir():
-        raise OutputError("is a folder; --out names the file to write", out)
-    parent = (per_scan if per_scan is not None else out).resolve().parent
+    parent = path.resolve().parent
     if parent.exists() and not parent.is_dir():
         raise OutputError("cannot write here (not a folder)", parent)
-    return target, per_scan
 
 
 def _run(
@@ -131,19 +148,28 @@ def _run(
     from ndt_cli.errors import InputError
     from ndt_cli.io.export import export
     from ndt_cli.io.points import check_readable
-    from ndt_cli.report.cloud import export_scans, result_scans, select
+    from ndt_cli.report import cloud
 
-    scans, anchor = result_scans(folder)
-    keep, left = select(scans, names.split(",") if names else None, include_suspect)
+    scans, anchor = cloud.result_scans(folder)
+    cfg = cloud.result_config(folder)
+    keep, left = cloud.select(scans, None if names is None else names.split(","), include_suspect)
     for line in left:
         log.warning("left out %s", line)
     if not keep:
         raise InputError("no scan of the result can be exported (see the lines above)", folder)
     for k in keep:
         check_readable(scans[k].file)
+    cloud.check_scan_files(scans, keep)
+    chosen = cloud.export_scans(keep, scans, anchor, cfg)
     with _Bar(not quiet) as progress:
-        chosen = export_scans(folder, keep, scans, anchor)
-        res = export(chosen, target, voxel=voxel, per_scan_dir=per_scan, progress=progress)
+        res = export(
+            chosen,
+            target,
+            voxel=voxel,
+            per_scan_dir=per_scan,
+            progress=progress,
+            protect=[s.file for s in scans],
+        )
     return {
         "files": [str(p) for p in res.paths],
         "scans": [scans[k].name for k in keep],

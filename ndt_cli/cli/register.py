@@ -67,6 +67,7 @@ def register(
         cfg = load_config(config, print_config)
         if target is None or source is None:
             raise InputError("give TARGET and SOURCE (see ndt-register --help)")
+        check_out(out, target, source, init, config)
         result = _run(target, source, cfg, init, out)
     _show(result, out, json_out, quiet)
     if not result.ok:
@@ -79,11 +80,11 @@ def register(
 
 
 def _run(target: Path, source: Path, cfg: object, init: Path | None, out: Path) -> object:
-    """Check every input and the output before the work, register, publish the outputs."""
+    """Check every input before the work (the output is checked), register, publish the
+    outputs."""
     from ndt_cli.io.matrices import read_matrix
     from ndt_cli.io.points import check_readable
 
-    check_out(out)
     check_readable(target)
     check_readable(source)
     T_init = read_matrix(init) if init is not None else None

@@ -133,7 +133,7 @@ def _check(
     if idle is not None and not 0 < idle <= 1e6:
         raise ConfigError(f"--exit-when-idle must be above 0 s, got {idle}")
     network_options(neighbours, True, radius, None, [])
-    check_out(out)
+    check_out(out, folder)
     return _Options(folder, out, jobs, neighbours, radius, idle, interval, settle)
 
 
@@ -178,10 +178,11 @@ def _add(campaign: Campaign, scan: Landed, cfg: Config, out: Path) -> ChainResul
     import time
 
     from ndt_cli.report.chain_outputs import write_chain_outputs
+    from ndt_cli.report.reasons import with_named_reasons
 
     t0 = time.perf_counter()
     campaign.add_scans([scan.path])
-    result = campaign.result()
+    result = with_named_reasons(campaign.result())
     write_chain_outputs(out, result, cfg, time.perf_counter() - t0)
     report = campaign.report(len(result.scans) - 1, result)
     typer.echo(_line(report, time.time() - scan.mtime, time.perf_counter() - t0), err=True)

@@ -8,24 +8,17 @@ reported, never used for registration).
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ndt_cli.errors import InputError
-
-_SPEC = re.compile(r"^(?P<file>.+\.e57)#(?P<index>\d+)$", re.IGNORECASE)
-
-
-def split_spec(spec: str | Path) -> tuple[Path, int | None]:
-    """``'a.e57#3'`` -> (Path('a.e57'), 3); anything else -> (Path(spec), None)."""
-    m = _SPEC.match(str(spec))
-    return (Path(m["file"]), int(m["index"])) if m else (Path(spec), None)
+from ndt_cli.errors import InputError, one_line
+from ndt_cli.io.multiscan import split_spec, which_scan
 
 
-def _open(path: Path) -> Any:
+def open_file(path: Path) -> Any:
+    """The E57 file opened with pye57; an InputError naming it when it cannot be."""
     try:
         import pye57
     except ImportError:
@@ -33,70 +26,24 @@ def _open(path: Path) -> Any:
     try:
         return pye57.E57(str(path))
     except Exception as exc:  # libE57 errors are plain exceptions
-        raise InputError(
-            f"not a valid E57 file: {' '.join(str(exc).split())[:160]}", path
-        ) from None
+        raise InputError(f"not a valid E57 file: {one_line(exc)}", path) from None
 
 
 def scan_count(path: str | Path) -> int:
     """Number of scans in an E57 file."""
-    e57 = _open(Path(path))
+    e57 = open_file(Path(path))
     try:
         return int(e57.scan_count)
     finally:
         e57.close()
 
 
-def expand(paths: list[Path]) -> list[Path]:
-    """Each multi-scan E57 file becomes ``FILE.e57#0``, ``#1``, ... in order; others unchanged."""
-    out: list[Path] = []
-    for p in paths:
-        n = 1
-        if p.suffix.lower() == ".e57" and split_spec(p)[1] is None and p.is_file():
-            try:
-                n = scan_count(p)
-            except InputError:
-                n = 1  # left as it is: reading it fails later and is reported for its link
-        out.extend(Path(f"{p}#{k}") for k in range(n)) if n > 1 else out.append(p)
-    return out
-
-
-def header_poses(paths: list[Path]) -> dict[int, np.ndarray]:
-    """Header poses of the E57 scans among ``paths`` (by position); unreadable ones are skipped."""
-    poses = {}
-    for k, p in enumerate(paths):
-        if split_spec(p)[0].suffix.lower() == ".e57":
-            try:
-                T = header_pose(p)
-            except InputError:
-                continue
-            if T is not None:
-                poses[k] = T
-    return poses
-
-
-def _index(path: Path, index: int | None, count: int, spec: str) -> int:
-    if count == 0:
-        raise InputError("the E57 file holds no scan", spec)
-    if index is None:
-        if count > 1:
-            raise InputError(
-                f"holds {count} scans: name one as {path.name}#K (K = 0..{count - 1}) "
-                "or register them all with ndt-chain",
-                spec,
-            )
-        return 0
-    if index >= count:
-        raise InputError(f"no scan #{index} (the file holds {count})", spec)
-    return index
-
-
 def check_scan(spec: str | Path) -> None:
     """Raise unless the file opens as E57 and holds the scan that ``spec`` names."""
     path, index = split_spec(spec)
-    e57 = _open(path)
+    e57 = open_file(path)
     try:
-        _index(path, index, int(e57.scan_count), str(spec))
+        which_scan(path, index, int(e57.scan_count), str(spec))
     finally:
         e57.close()
 
@@ -104,16 +51,14 @@ def check_scan(spec: str | Path) -> None:
 def read_xyz(spec: str | Path) -> np.ndarray:
     """(N,3) float64 points of one scan, in the scan's own frame (header pose not applied)."""
     path, index = split_spec(spec)
-    e57 = _open(path)
+    e57 = open_file(path)
     try:
-        k = _index(path, index, int(e57.scan_count), str(spec))
+        k = which_scan(path, index, int(e57.scan_count), str(spec))
         data = e57.read_scan(k, transform=False, ignore_missing_fields=True)
     except InputError:
         raise
     except Exception as exc:
-        raise InputError(
-            f"cannot read E57 scan: {' '.join(str(exc).split())[:160]}", spec
-        ) from None
+        raise InputError(f"cannot read E57 scan: {one_line(exc)}", spec) from None
     finally:
         e57.close()
     if "cartesianX" in data:
@@ -129,9 +74,9 @@ def read_xyz(spec: str | Path) -> np.ndarray:
 def header_pose(spec: str | Path) -> np.ndarray | None:
     """The 4x4 pose stored in a scan's header (scan frame to file frame), or None."""
     path, index = split_spec(spec)
-    e57 = _open(path)
+    e57 = open_file(path)
     try:
-        k = _index(path, index, int(e57.scan_count), str(spec))
+        k = which_scan(path, index, int(e57.scan_count), str(spec))
         header = e57.get_header(k)
         if not header.has_pose():
             return None

@@ -12,9 +12,12 @@ world frame with the scan's ``T_world_file`` and writes, by the extension of ``o
   pose ``T_world_scan`` in the scan header (:mod:`ndt_cli.io.export_other`).
 
 With ``per_scan_dir``, one file per scan is written there instead (in ``out``'s format), named
-after the scan. ``voxel`` thins to one point per cube of the world frame (the first point met:
-scans in the given order, points in file order). Points that are not finite or exactly (0,0,0)
-in the file (no-return points) are dropped, as everywhere in ndt-cli.
+after the scan and listed in the folder's manifest (``.ndt-cli-outputs``): a later per-scan
+export into the folder replaces them and removes those it does not write again, and never
+replaces a file that no export wrote there (nor a scan it reads). ``voxel`` thins to one point
+per cube of the world frame (the first point met: scans in the given order, points in file
+order). Points that are not finite or exactly (0,0,0) in the file (no-return points) are
+dropped, as everywhere in ndt-cli.
 
 Memory stays bounded: one chunk of ``chunk_points`` points at a time (a process peaks at about
 0.3-0.4 GB with the default 1 M, whatever the number of points), plus, with ``voxel``, 8 bytes
@@ -26,7 +29,6 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import re
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,8 +37,10 @@ from typing import Protocol
 import numpy as np
 
 from ndt_cli.core.arrays import column_bounds
-from ndt_cli.errors import InputError, OutputError
+from ndt_cli.errors import InputError, NdtError, OutputError, one_line
 from ndt_cli.io.atomic import atomic_path
+from ndt_cli.io.names import per_scan_file_names
+from ndt_cli.io.outdir import check_shared_folder, record_shared_folder
 from ndt_cli.io.records import CHUNK_POINTS, Chunk, Summary, iter_records, summary
 
 log = logging.getLogger(__name__)
@@ -199,8 +203,12 @@ class FirstPointThinner:
         return mask
 
 
+COLOURS = ("red", "green", "blue")
+
+
 def _first_pass(scan: ExportScan, summ: Summary, chunk_points: int) -> ScanInput:
-    """Count, bounding box (file frame, usable points) and float ranges, from the points."""
+    """Count, bounding box (file frame, usable points) and the ranges of the float attributes
+    and of the colours, from the points."""
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     ranges: dict[str, tuple[float, float]] = {}
     n = 0
@@ -212,7 +220,7 @@ def _first_pass(scan: ExportScan, summ: Summary, chunk_points: int) -> ScanInput
             low, high = column_bounds(pts)
             lo, hi = np.minimum(lo, low), np.maximum(hi, high)
         for name, values in chunk.items():
-            if name in ("x", "y", "z") or values.dtype.kind != "f":
+            if name in ("x", "y", "z") or (values.dtype.kind != "f" and name not in COLOURS):
                 continue
             finite = values[np.isfinite(values)]
             if finite.size:
@@ -228,12 +236,22 @@ def _usable(chunk: Chunk) -> np.ndarray:
     return np.isfinite(x + y + z) & ((x != 0.0) | (y != 0.0) | (z != 0.0))
 
 
-def _inputs(scans: Sequence[ExportScan], need_bounds: bool, chunk_points: int) -> list[ScanInput]:
-    """Summaries of the scans, with a first pass over those whose header lacks what is needed."""
+def _wide_colours(summ: Summary) -> bool:
+    """Whether the file stores colours in more than 8 bits (LAS: 16)."""
+    d = summ.dimension("red")
+    return d is not None and d.dtype.itemsize > 1
+
+
+def _inputs(
+    scans: Sequence[ExportScan], need_bounds: bool, chunk_points: int, need_colours: bool = False
+) -> list[ScanInput]:
+    """Summaries of the scans, with a first pass over those whose header lacks what is needed
+    (``need_colours``: the range of colours stored in more than 8 bits)."""
     out = []
     for scan in scans:
         summ = summary(scan.path)
-        if summ.count is None or (need_bounds and summ.bounds is None):
+        wide = need_colours and _wide_colours(summ)
+        if wide or summ.count is None or (need_bounds and summ.bounds is None):
             out.append(_first_pass(scan, summ, chunk_points))
         else:
             out.append(ScanInput(scan, summ, summ.count, summ.bounds))
@@ -270,22 +288,25 @@ def anchor_of(scans: Sequence[ExportScan]) -> ExportScan:
     return next((s for s in scans if s.anchor), scans[0])
 
 
-def per_scan_file_names(names: Sequence[str], suffix: str) -> list[str]:
-    """One file name per scan name, safe on every file system and unique (case-insensitively):
-    ``north/scan_1.laz`` -> ``north_scan_1.laz``, ``campaign.e57#2`` -> ``campaign_2.laz``."""
-    from ndt_cli.pipeline.scans import file_stem
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == b.resolve() or (a.exists() and b.exists() and a.samefile(b))
+    except OSError:
+        return False
 
-    out: list[str] = []
-    taken: set[str] = set()
-    for name in names:
-        stem = re.sub(r"[^A-Za-z0-9._-]+", "_", file_stem(name)).strip("._") or "scan"
-        candidate, k = stem, 1
-        while f"{candidate}{suffix}".lower() in taken:
-            k += 1
-            candidate = f"{stem}_{k}"
-        taken.add(f"{candidate}{suffix}".lower())
-        out.append(f"{candidate}{suffix}")
-    return out
+
+def refuse_inputs(targets: Sequence[Path], inputs: Sequence[str | Path]) -> None:
+    """Raise :class:`OutputError` when a file to write is one of the ``inputs`` (point files;
+    ``FILE.e57#K`` is the file): an export never replaces what it reads."""
+    from ndt_cli.io.multiscan import split_spec
+
+    files = [split_spec(p)[0] for p in inputs]
+    for target in targets:
+        hit = next((f for f in files if _same_file(target, f)), None)
+        if hit is not None:
+            raise OutputError(
+                f"is the scan file {hit}: an export never overwrites its input", target
+            )
 
 
 def _make_sink(
@@ -398,10 +419,38 @@ def _write_files(
     with contextlib.ExitStack() as stack:
         tmps = [stack.enter_context(atomic_path(t)) for t in targets]
         for tmp, group, t in zip(tmps, groups, targets, strict=True):
-            sink = _make_sink(suffix, tmp, group, anchor, t, chunk_points)
-            _write(sink, group, thinner, tally, chunk_points, progress)
+            with _writing(t):
+                sink = _make_sink(suffix, tmp, group, anchor, t, chunk_points)
+                _write(sink, group, thinner, tally, chunk_points, progress)
             formats.append(getattr(sink, "point_format", None))
     return formats
+
+
+@contextlib.contextmanager
+def _writing(target: Path) -> Iterator[None]:
+    """A failure of the writing library (a full disk, a file-size limit: lazrs and libE57 raise
+    their own errors) as one line naming ``target``; user errors and bugs pass unchanged."""
+    try:
+        yield
+    except NdtError:
+        raise
+    except OSError as exc:
+        raise OutputError(f"cannot write ({exc.strerror or one_line(exc)})", target) from exc
+    except _library_errors() as exc:
+        raise OutputError(f"cannot write ({one_line(exc)}; is the disk full?)", target) from exc
+
+
+def _library_errors() -> tuple[type[Exception], ...]:
+    """What the writing libraries raise: lazrs.LazrsError (a RuntimeError), laspy's errors and
+    libE57's E57Exception (when pye57 is installed)."""
+    from laspy.errors import LaspyException
+
+    errors: tuple[type[Exception], ...] = (RuntimeError, LaspyException)
+    try:
+        from pye57.libe57 import E57Exception
+    except ImportError:
+        return errors
+    return (*errors, E57Exception)
 
 
 def export(
@@ -412,6 +461,7 @@ def export(
     per_scan_dir: str | Path | None = None,
     chunk_points: int = CHUNK_POINTS,
     progress: Progress | None = None,
+    protect: Sequence[str | Path] = (),
 ) -> ExportResult:
     """Write the registered cloud of ``scans`` (see the module docstring) and say what was written.
 
@@ -419,7 +469,8 @@ def export(
     ``per_scan_dir``, one file per scan is written into that folder instead, in ``out``'s
     format (``out`` itself is not written). ``voxel``: thinning cube edge in metres (None: keep
     every point). ``chunk_points``: points read and written at a time. ``progress``: called
-    after every chunk with (points read so far, points in all inputs).
+    after every chunk with (points read so far, points in all inputs). ``protect``: more files
+    that must not be written (the scans' own files never are).
 
     Raises :class:`OutputError` (unwritable target, unsupported extension, incompatible extra
     bytes, extent too large) and :class:`InputError` (unreadable input), each one line naming the
@@ -429,18 +480,25 @@ def export(
     suffix = _check(scans, target)
     if voxel is not None and not voxel > 0:
         raise ValueError(f"voxel must be > 0 m, got {voxel}")
-    inputs = _inputs(scans, suffix in (".las", ".laz") or voxel is not None, chunk_points)
-    thinner = None if voxel is None else FirstPointThinner(voxel, *_union_bounds(inputs))
     if per_scan_dir is None:
-        targets, groups = [target], [inputs]
+        targets = [target]
     else:
         names = per_scan_file_names([s.name for s in scans], suffix)
-        targets, groups = [Path(per_scan_dir) / n for n in names], [[i] for i in inputs]
+        targets = [Path(per_scan_dir) / n for n in names]
+    refuse_inputs(targets, [*(s.path for s in scans), *protect])
+    if per_scan_dir is not None:
+        check_shared_folder(Path(per_scan_dir), [t.name for t in targets])
+    need_bounds = suffix in (".las", ".laz") or voxel is not None
+    inputs = _inputs(scans, need_bounds, chunk_points, need_colours=suffix == ".e57")
+    thinner = None if voxel is None else FirstPointThinner(voxel, *_union_bounds(inputs))
+    groups = [inputs] if per_scan_dir is None else [[i] for i in inputs]
     tally = _Tally(total=sum(i.count for i in inputs))
     with _removed_on_failure(None if per_scan_dir is None else Path(per_scan_dir)):
         formats = _write_files(
             suffix, targets, groups, anchor_of(scans), thinner, tally, chunk_points, progress
         )
+        if per_scan_dir is not None:
+            record_shared_folder(Path(per_scan_dir), [t.name for t in targets])
     result = ExportResult(
         paths=tuple(targets),
         points_read=tally.read,

@@ -11,8 +11,9 @@ E57: one scan per station (``data3D`` child named after the scan), its points in
 scanner frame (raw file coordinates times ``S_scan_file``, metres, float64) and its pose
 ``T_world_scan`` in the scan header (unit quaternion w, x, y, z and translation, m). Kept when
 present: ``intensity`` (float32; ``intensityLimits`` from the source E57, 0..65535 for LAS,
-else the values' range), colours (8 bits: LAS 16-bit colours are shifted right by 8 when the
-scan's first chunk has a value above 255, else taken as 8-bit values), ``rowIndex`` /
+else the values' range), colours (8 bits: LAS 16-bit colours are shifted right by 8 when any
+colour value of the scan is above 255, known from a first pass over the scan, else taken as
+8-bit values), ``rowIndex`` /
 ``columnIndex`` and ``timeStamp`` (from an E57 ``time_stamp`` or a LAS ``gps_time``). The file's
 ``coordinateMetadata`` is the anchor's WKT when it has one.
 """
@@ -205,7 +206,7 @@ def _e57_fields(summary: Summary, imf: Any, e: Any) -> list[tuple[str, str, str,
             out.append((f"color{c}", c.lower(), "u1", e.IntegerNode(imf, 0, 0, 255)))
     if {"row_index", "column_index"} <= names:
         for field, source in (("rowIndex", "row_index"), ("columnIndex", "column_index")):
-            out.append((field, source, "i4", e.IntegerNode(imf, 0, 0, 2**31 - 1)))
+            out.append((field, source, "q", e.IntegerNode(imf, 0, 0, 2**31 - 1)))
     time = next((n for n in ("time_stamp", "gps_time") if n in names), None)
     if time is not None:
         out.append(("timeStamp", time, "f8", e.FloatNode(imf, 0.0, e.E57_DOUBLE)))
@@ -253,15 +254,14 @@ class E57Sink:
         for field, array in self._arrays.items():
             buffers.append(e.SourceDestBuffer(imf, field, array, self._capacity, True, True))
         self._writer = points.writer(buffers)
-        self._item, self._shift = item, None
+        top = max(item.ranges.get(c, (0, 0))[1] for c in ("red", "green", "blue"))
+        self._item, self._shift = item, 8 if top > 255 else 0
         self._lo, self._hi = np.full(4, np.inf), np.full(4, -np.inf)  # x, y, z, intensity
 
     def _colour(self, values: np.ndarray) -> np.ndarray:
         """8-bit colour values (LAS 16-bit colours shifted, see the module docstring)."""
         if values.dtype == np.uint8:
             return values
-        if self._shift is None:
-            self._shift = 8 if values.max(initial=0) > 255 else 0
         out = values >> self._shift
         if out.max(initial=0) > 255:
             if not self._warned:

@@ -234,6 +234,22 @@ class E57Reader(PointReader):
         return e57.read_xyz(path)
 
 
+class PtxReader(PointReader):
+    """PTX (Leica Cyclone text); ``FILE.ptx#K`` names scan K, see :mod:`ndt_cli.io.ptx`."""
+
+    suffixes = (".ptx",)
+
+    def count(self, path: Path) -> int:
+        from ndt_cli.io import ptx
+
+        return ptx.scan_of(path).count
+
+    def read_xyz(self, path: Path) -> np.ndarray:
+        from ndt_cli.io import ptx
+
+        return ptx.read_xyz(path)
+
+
 def require_xyz(names: tuple[str, ...] | list[str], path: Path) -> None:
     """Raise unless the record field ``names`` include x, y and z."""
     if not {"x", "y", "z"} <= set(names):

@@ -6,6 +6,7 @@ format CloudCompare's ``-APPLY_TRANS`` and PDAL's ``filters.transformation`` rea
 
 from __future__ import annotations
 
+import json
 import re
 from collections.abc import Iterator
 from pathlib import Path
@@ -14,7 +15,45 @@ import numpy as np
 
 from ndt_cli.errors import InputError, read_user_text
 
-_COMMENT = re.compile(r"(^|\s)#.*$")  # 'scans.e57#2' is a name, not a comment
+# a field: a quoted name (JSON string syntax), a comment ('#' at the start or after a space:
+# 'scans.e57#2' is a name) up to the end of the line, or a run of other characters
+_FIELD = re.compile(r'\s*(?:("(?:[^"\\]|\\.)*")|(#.*)|(\S+))')
+
+
+def quote_name(name: str) -> str:
+    """A scan name as a field of a pose line: as it is, or quoted (JSON string syntax, every
+    character that is not printable escaped) when it is empty, holds white space, starts with a
+    quote or a ``#``, or holds a character that is not printable (a control, a bidi override,
+    a byte of a name that is not UTF-8)."""
+    plain = name.isprintable() and not any(c.isspace() for c in name)
+    if name and plain and name[0] not in '"#':
+        return name
+    body = json.dumps(name, ensure_ascii=False)[1:-1]
+    return '"' + "".join(c if c.isprintable() else _escape(c) for c in body) + '"'
+
+
+def _escape(char: str) -> str:
+    """``\\uXXXX`` (a surrogate pair above U+FFFF), as JSON writes a character."""
+    code = ord(char)
+    if code > 0xFFFF:
+        code -= 0x10000
+        return f"\\u{0xD800 + (code >> 10):04x}\\u{0xDC00 + (code & 0x3FF):04x}"
+    return f"\\u{code:04x}"
+
+
+def split_fields(line: str) -> list[str]:
+    """The fields of a line of a pose file: white-space separated, a quoted name unquoted (see
+    :func:`quote_name`), a comment dropped; ValueError for a quote that does not close."""
+    fields, pos = [], 0
+    while pos < len(line.rstrip()):
+        m = _FIELD.match(line, pos)
+        if m is None or m.end() == pos or (m.group(3) or "").startswith('"'):
+            raise ValueError("a quoted name does not end")
+        if m.group(2):
+            break
+        fields.append(json.loads(m.group(1)) if m.group(1) else m.group(3))
+        pos = m.end()
+    return fields
 
 
 def format_matrix(T: np.ndarray) -> str:
@@ -23,8 +62,9 @@ def format_matrix(T: np.ndarray) -> str:
 
 
 def format_pose_line(name: str, T: np.ndarray) -> str:
-    """``name`` and the 16 numbers of a 4x4, row-major, on one line (no newline)."""
-    return f"{name} " + " ".join(f"{v:.17g}" for v in np.asarray(T).ravel())
+    """``name`` (quoted if need be, see :func:`quote_name`) and the 16 numbers of a 4x4,
+    row-major, on one line (no newline)."""
+    return f"{quote_name(name)} " + " ".join(f"{v:.17g}" for v in np.asarray(T).ravel())
 
 
 def read_matrix(path: str | Path) -> np.ndarray:
@@ -38,21 +78,40 @@ def read_matrix(path: str | Path) -> np.ndarray:
     if len(values) != 16:
         raise InputError(f"expected 16 numbers (a 4x4 matrix), found {len(values)}", p)
     T = np.array(values).reshape(4, 4)
-    if not np.all(np.isfinite(T)) or not np.allclose(T[3], [0, 0, 0, 1]):
-        raise InputError("not a rigid 4x4 transform (last row must be 0 0 0 1)", p)
-    R = T[:3, :3]
-    if not np.allclose(R @ R.T, np.eye(3), atol=1e-4) or np.linalg.det(R) < 0:
-        raise InputError("the rotation part is not a rotation matrix", p)
+    problem = rigid_problem(T)
+    if problem:
+        raise InputError(problem, p)
     return T
+
+
+def rigid_problem(T: np.ndarray, tol: float = 1e-4) -> str:
+    """What keeps a 4x4 from being a rigid transform ('' when it is one): a value that is not
+    finite, a last row other than 0 0 0 1, or a rotation part that is not a rotation (``R R^T``
+    off the identity by more than ``tol``, or a reflection)."""
+    T = np.asarray(T, dtype=np.float64)
+    if T.shape != (4, 4):
+        return f"not a 4x4 matrix (shape {T.shape})"
+    if not np.all(np.isfinite(T)):
+        return "not a rigid 4x4 transform (a value is not finite)"
+    if not np.allclose(T[3], [0, 0, 0, 1]):
+        return "not a rigid 4x4 transform (last row must be 0 0 0 1)"
+    R = T[:3, :3]
+    if np.abs(R @ R.T - np.eye(3)).max() > tol or np.linalg.det(R) < 0:
+        return "the rotation part is not a rotation matrix"
+    return ""
 
 
 def named_rows(path: str | Path, what: str) -> Iterator[tuple[int, list[str]]]:
     """(line number, fields) of every non-empty line of a text file of named matrices.
 
-    A ``#`` at the start of a line or after a space starts a comment (``scans.e57#2`` is a name).
+    A ``#`` at the start of a line or after a space starts a comment (``scans.e57#2`` is a name);
+    a name in double quotes may hold spaces and escapes (see :func:`quote_name`).
     """
     for number, line in enumerate(read_user_text(path, what).splitlines(), 1):
-        fields = _COMMENT.sub("", line).split()
+        try:
+            fields = split_fields(line)
+        except ValueError as exc:
+            raise InputError(f"line {number}: {exc}", path) from None
         if fields:
             yield number, fields
 

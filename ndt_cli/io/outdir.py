@@ -6,8 +6,10 @@ cannot exchange, two renames). Killed at any moment, a run leaves either the old
 new one, never a mix; a temporary folder left behind by a killed run is removed by the next run
 that writes the same output.
 
-An output folder holds only what ndt-cli writes there: a folder with other files is refused
-before any work starts, so that replacing it can never lose a user's file. Folders of resume
+An output folder holds only what ndt-cli writes there: every file a run writes is listed in
+the folder's manifest (``.ndt-cli-outputs``), and a folder with any other entry (at any depth)
+is refused before any work starts, so that replacing it can never lose a user's file; so is an
+output folder that is, holds or lies inside a file or folder the run reads. Folders of resume
 state (``links/``) are carried over into the new folder.
 """
 
@@ -16,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import errno
+import hashlib
 import os
 import re
 import shutil
@@ -23,9 +26,11 @@ import uuid
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 
-from ndt_cli.errors import OutputError
+from ndt_cli.errors import InputError, OutputError
+from ndt_cli.io.atomic import atomic_path, pid_alive
 
-MANIFEST = ".ndt-cli-outputs"  # names of the files a run wrote, one per line
+MANIFEST = ".ndt-cli-outputs"  # 'SHA-256  name' of every file a run wrote (sha256sum -c)
+_DIGEST_LINE = re.compile(r"^([0-9a-f]{64})  (.+)$")
 STATE = ("links",)  # folders a later run reuses (--resume): carried over, never dropped
 # what ndt-cli versions without a manifest wrote into an output folder
 KNOWN = re.compile(
@@ -51,11 +56,119 @@ def _entries(folder: Path) -> list[str]:
     return sorted(e.name + ("/" if e.is_dir() else "") for e in folder.iterdir())
 
 
-def check_output_folder(out: Path) -> Path:
+def output_digests(folder: Path) -> dict[str, str] | None:
+    """Name (relative, ``/``-separated) -> SHA-256 of every file the manifest of ``folder``
+    lists ('' in a manifest of an older ndt-cli, which lists names only), or None when the
+    folder has no manifest (or it cannot be read)."""
+    try:
+        text = (folder / MANIFEST).read_text(encoding="utf-8", errors="surrogateescape")
+    except (OSError, ValueError):
+        return None
+    out = {}
+    for line in filter(None, text.splitlines()):
+        m = _DIGEST_LINE.match(line)
+        out[m[2] if m else line] = m[1] if m else ""
+    return out
+
+
+def listed_outputs(folder: Path) -> list[str] | None:
+    """The names the manifest of ``folder`` lists, or None when it has no manifest."""
+    digests = output_digests(folder)
+    return None if digests is None else list(digests)
+
+
+def sha256_of(path: Path) -> str:
+    """SHA-256 (hex) of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while chunk := fh.read(1 << 20):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def check_unchanged(folder: Path, names: Iterable[str]) -> None:
+    """Raise :class:`InputError` when one of the files ``names`` of a result folder is not
+    what its run wrote: another SHA-256 than the manifest records, or not listed in it. A folder
+    without a manifest (or a manifest without digests) is not checked."""
+    digests = output_digests(folder)
+    if digests is None:
+        return
+    for name in names:
+        path = folder / name
+        if not path.is_file():
+            continue  # reported by the reader, naming what is missing
+        if name not in digests:
+            raise InputError(f"not listed in {MANIFEST}: not written by this result's run", path)
+        try:
+            same = not digests[name] or sha256_of(path) == digests[name]
+        except OSError as exc:
+            raise InputError(f"cannot read ({exc.strerror or exc})", path) from None
+        if not same:
+            raise InputError(
+                f"changed since ndt-cli wrote it (its SHA-256 is not the one in {MANIFEST})",
+                path,
+            )
+
+
+def _walk(folder: Path) -> tuple[list[str], list[str]]:
+    """(files, folders) under ``folder``, relative and ``/``-separated (folders end in ``/``),
+    without the manifest and the resume state."""
+    files, folders = [], []
+    for root, subdirs, names in os.walk(folder):
+        rel = Path(root).relative_to(folder).as_posix()
+        prefix = "" if rel == "." else rel + "/"
+        if not prefix:
+            subdirs[:] = [d for d in subdirs if d not in STATE]
+        folders += [prefix + d + "/" for d in subdirs]
+        files += [prefix + n for n in names if prefix + n != MANIFEST]
+    return files, folders
+
+
+def foreign_entries(folder: Path, listed: Iterable[str]) -> list[str]:
+    """Entries under ``folder`` that are neither in ``listed`` nor hold a listed file (nor the
+    manifest, nor resume state): what a run did not write."""
+    names = set(listed)
+    files, folders = _walk(folder)
+    foreign = [f for f in files if f not in names]
+    foreign += [d for d in folders if not any(n.startswith(d) for n in names)]
+    return sorted(foreign)
+
+
+def _foreign(real: Path) -> list[str]:
+    """What ``real`` holds that ndt-cli did not write (empty: an earlier result, or new)."""
+    listed = listed_outputs(real)
+    if listed is not None:
+        return foreign_entries(real, listed)
+    entries = _entries(real)
+    foreign = [e for e in entries if not KNOWN.match(e)]
+    return foreign or ([] if not entries or set(MARKERS) & set(entries) else entries)
+
+
+def _check_inputs(real: Path, out: Path, inputs: Iterable[str | Path]) -> None:
+    """Refuse an output folder that is, holds, or lies inside a file or folder the run reads."""
+    from ndt_cli.io.multiscan import split_spec
+
+    for given in inputs:
+        path = split_spec(given)[0].resolve()
+        try:
+            inside = path == real or real in path.parents
+            holds = path.is_dir() and path in real.parents
+        except OSError:  # not to be seen here: its own check reports it
+            continue
+        if inside or holds:
+            raise OutputError(
+                f"the output folder must not be, hold or lie inside an input ({given}): "
+                "choose another folder",
+                out,
+            )
+
+
+def check_output_folder(out: Path, inputs: Iterable[str | Path] = ()) -> Path:
     """The folder a run may write (symlinks resolved): new, empty, or an earlier result.
 
     Raises :class:`OutputError` (checked before any work) when ``out`` is a file, the current
-    folder or one of its parents, cannot be written, or holds files ndt-cli did not write.
+    folder or one of its parents, cannot be written, holds files ndt-cli did not write (an
+    entry its manifest does not list), or is, holds or lies inside one of the run's ``inputs``.
     """
     if str(out) == "":
         raise OutputError("the output folder name is empty")
@@ -66,35 +179,25 @@ def check_output_folder(out: Path) -> Path:
             raise OutputError("the output path exists and is not a folder", out)
         if real == real.parent or Path.cwd().resolve().is_relative_to(real):
             raise OutputError("the output must be a folder of its own, not this folder", out)
-        if exists and not (real / MANIFEST).exists():
-            entries = _entries(real)
-            foreign = [e for e in entries if not KNOWN.match(e)]
-            if foreign or (entries and not set(MARKERS) & set(entries)):
-                shown = (foreign or entries)[0]
-                raise OutputError(
-                    f"the folder holds files that ndt-cli did not write ({shown}, ...): "
-                    "choose a new or empty folder",
-                    out,
-                )
+        _check_inputs(real, out, inputs)
+        foreign = _foreign(real) if exists else []
+        if foreign:
+            raise OutputError(
+                f"the folder holds files that ndt-cli did not write ({foreign[0]}, ...): "
+                "choose a new or empty folder",
+                out,
+            )
         parent = real.parent  # the new content is staged in a folder beside the output
         while not parent.exists():
             parent = parent.parent
         writable = os.access(parent, os.W_OK | os.X_OK)
         if not writable or (exists and not os.access(real, os.W_OK | os.X_OK)):
-            raise OutputError("cannot write here (permission denied)", out)
+            read_only = os.statvfs(real if exists else parent).f_flag & os.ST_RDONLY
+            why = "read-only file system" if read_only else "permission denied"
+            raise OutputError(f"cannot write here ({why})", out)
     except PermissionError as exc:
         raise OutputError(f"cannot write here ({exc.strerror})", out) from None
     return real
-
-
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 def clean_stale(out: Path) -> None:
@@ -104,7 +207,7 @@ def clean_stale(out: Path) -> None:
         return
     for entry in out.parent.iterdir():
         m = pattern.match(entry.name)
-        if m and not _pid_alive(int(m.group(2))):
+        if m and not pid_alive(int(m.group(2))):
             shutil.rmtree(entry, ignore_errors=True)
 
 
@@ -150,12 +253,20 @@ def _write(folder: Path, files: Mapping[str, Content]) -> None:
         if callable(content):
             content(path)
         else:
-            data = content.encode("utf-8") if isinstance(content, str) else content
+            # a name that is not valid UTF-8 (a Latin-1 file name) is shown escaped
+            data = (
+                content.encode("utf-8", "backslashreplace") if isinstance(content, str) else content
+            )
             with open(path, "wb") as fh:
                 fh.write(data)
                 fh.flush()
                 os.fsync(fh.fileno())
-    (folder / MANIFEST).write_text("\n".join(sorted(files)) + "\n", encoding="utf-8")
+
+
+def _write_manifest(folder: Path) -> None:
+    """List every file of ``folder`` but the resume state in its manifest, with its SHA-256."""
+    text = "".join(f"{sha256_of(folder / n)}  {n}\n" for n in sorted(_walk(folder)[0]))
+    (folder / MANIFEST).write_text(text, encoding="utf-8", errors="surrogateescape")
 
 
 def _sync_folder(folder: Path) -> None:
@@ -193,10 +304,42 @@ def publish(out: Path, files: Mapping[str, Content], keep_others: bool = False) 
         if real.is_dir():
             others = [e.name for e in real.iterdir() if e.name not in files and e.name != MANIFEST]
             _carry(real, tmp, others if keep_others else STATE)
+        _write_manifest(tmp)
         _sync_folder(tmp)
         old = _swap_in(tmp, real)
     except OSError as exc:
         shutil.rmtree(tmp, ignore_errors=True)
         raise OutputError(f"cannot write the outputs ({exc.strerror or exc})", out) from None
+    except BaseException:  # a bug or Ctrl-C: no staging folder is left beside the output
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
     with contextlib.suppress(OSError):
         shutil.rmtree(old, ignore_errors=True)
+
+
+def check_shared_folder(folder: Path, names: Iterable[str]) -> None:
+    """Raise :class:`OutputError` before files ``names`` are written into ``folder``, a folder
+    that may hold other files (``ndt-export --per-scan``), when one of them would replace a file
+    no earlier such export wrote (its manifest does not list it), or when ``folder`` is the
+    output folder of a run."""
+    listed = output_digests(folder) or {}
+    if set(listed) & {m.rstrip("/") for m in MARKERS}:
+        raise OutputError("is the output folder of a run: choose another folder", folder)
+    for name in names:
+        path = folder / name
+        if (path.exists() or path.is_symlink()) and name not in listed:
+            raise OutputError(
+                "exists and no earlier export wrote it: remove it or choose another folder", path
+            )
+
+
+def record_shared_folder(folder: Path, names: Iterable[str]) -> None:
+    """After files ``names`` were written into ``folder``: remove the files an earlier export
+    wrote there that this one did not, and list this one's files in the folder's manifest."""
+    names = sorted(names)
+    for stale in set(output_digests(folder) or {}) - set(names):
+        with contextlib.suppress(OSError):
+            (folder / stale).unlink()
+    text = "".join(f"{sha256_of(folder / n)}  {n}\n" for n in names)
+    with atomic_path(folder / MANIFEST) as tmp:
+        tmp.write_text(text, encoding="utf-8")

@@ -16,8 +16,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ndt_cli.errors import InputError, NdtError
-from ndt_cli.io.formats import E57Reader, LasReader, PcdReader, PlyReader, PointReader
+from ndt_cli.errors import InputError, NdtError, one_line
+from ndt_cli.io.formats import (
+    E57Reader,
+    LasReader,
+    PcdReader,
+    PlyReader,
+    PointReader,
+    PtxReader,
+)
 from ndt_cli.io.text import TextReader
 
 logger = logging.getLogger(__name__)
@@ -28,6 +35,7 @@ READERS: tuple[PointReader, ...] = (
     PcdReader(),
     TextReader(),
     E57Reader(),
+    PtxReader(),
 )
 SUPPORTED_SUFFIXES: tuple[str, ...] = tuple(s for r in READERS for s in r.suffixes)
 
@@ -94,7 +102,7 @@ def reader_for(path: Path) -> PointReader:
 def _open(path: str | Path) -> tuple[Path, PointReader]:
     """The path and its reader, after the checks every format shares: the file exists, is a
     regular file (not a folder, FIFO or device), can be read and is not empty."""
-    from ndt_cli.io.e57 import split_spec
+    from ndt_cli.io.multiscan import split_spec
 
     p = Path(path)
     f = split_spec(p)[0]  # 'scans.e57#3' names scan 3 of scans.e57
@@ -121,12 +129,6 @@ def check_readable(path: str | Path) -> None:
     p, reader = _open(path)
     with file_errors(p):
         reader.check(p)
-
-
-def one_line(exc: BaseException, limit: int = 160) -> str:
-    """An exception's text on one line, at most ``limit`` characters."""
-    text = " ".join(str(exc).split()) or type(exc).__name__
-    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 @contextmanager

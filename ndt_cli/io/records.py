@@ -18,7 +18,9 @@ dimension, streamed with laspy's ``chunk_iterator``; PLY every scalar ``vertex``
 becomes ``red``, ``green``, ``blue``); E57 (``FILE.e57#K`` names scan K, see
 :mod:`ndt_cli.io.e57`) ``intensity``, ``red``/``green``/``blue``, ``row_index``/``column_index``
 and ``time_stamp`` when present, streamed, points flagged invalid dropped, spherical coordinates
-turned cartesian; text files x, y, z only. No point is dropped here otherwise.
+turned cartesian; PTX (``FILE.ptx#K``, see :mod:`ndt_cli.io.ptx`) ``intensity`` and
+``red``/``green``/``blue`` when present; text files x, y, z only. No point is dropped here
+otherwise.
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ import laspy
 import numpy as np
 
 from ndt_cli.errors import InputError
-from ndt_cli.io.e57 import split_spec
+from ndt_cli.io.multiscan import split_spec
 from ndt_cli.io.points import file_errors
 
 CHUNK_POINTS = 1_000_000
@@ -49,6 +51,7 @@ FORMATS = {
     ".ply": "ply",
     ".pcd": "pcd",
     ".e57": "e57",
+    ".ptx": "ptx",
     ".xyz": "text",
     ".txt": "text",
     ".csv": "text",
@@ -159,6 +162,7 @@ def summary(path: str | Path) -> Summary:
     p, fmt = _checked(path)
     readers = {"las": _las_summary, "laz": _las_summary, "ply": other.ply_summary}
     readers |= {"pcd": other.pcd_summary, "e57": other.e57_summary, "text": other.text_summary}
+    readers |= {"ptx": other.ptx_summary}
     with file_errors(p):
         return readers[fmt](p)
 
@@ -171,6 +175,7 @@ def iter_records(path: str | Path, chunk_points: int = CHUNK_POINTS) -> Iterator
     p, fmt = _checked(path)
     readers = {"las": _las_chunks, "laz": _las_chunks, "ply": other.ply_chunks}
     readers |= {"pcd": other.pcd_chunks, "e57": other.e57_chunks, "text": other.text_chunks}
+    readers |= {"ptx": other.ptx_chunks}
     with file_errors(p):
         yield from readers[fmt](p, max(1, int(chunk_points)))
 

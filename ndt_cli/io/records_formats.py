@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from ndt_cli.errors import InputError
-from ndt_cli.io.e57 import split_spec
+from ndt_cli.io.multiscan import split_spec
 from ndt_cli.io.records import Chunk, Dimension, Summary
 
 _PLY_TYPES = {
@@ -167,6 +167,42 @@ def pcd_chunks(p: Path, chunk_points: int) -> Iterator[Chunk]:
         yield out
 
 
+# --- PTX -------------------------------------------------------------------------------------
+
+_PTX_COLOURS = ("red", "green", "blue")
+
+
+def _ptx_width(p: Path) -> int:
+    """Numbers per point line of the scan: 4 (x y z intensity) or 7 (and red green blue)."""
+    from ndt_cli.io import ptx
+
+    first = next(ptx.chunks(p, 1), None)
+    return 4 if first is None else first.shape[1]
+
+
+def ptx_summary(p: Path) -> Summary:
+    from ndt_cli.io import ptx
+
+    scan = ptx.scan_of(p)
+    dims = [Dimension("intensity", np.dtype("f4"))]
+    if _ptx_width(p) == 7:
+        dims += [Dimension(c, np.dtype("u1")) for c in _PTX_COLOURS]
+    return Summary(p, "ptx", scan.count, None, tuple(dims), pose=scan.transform)
+
+
+def ptx_chunks(p: Path, chunk_points: int) -> Iterator[Chunk]:
+    """Point lines as read (missing returns ``0 0 0`` included), scanner frame."""
+    from ndt_cli.io import ptx
+
+    for block in ptx.chunks(p, chunk_points):
+        out = {a: np.ascontiguousarray(block[:, k]) for k, a in enumerate(_XYZ)}
+        out["intensity"] = block[:, 3].astype(np.float32)
+        if block.shape[1] == 7:
+            for k, c in enumerate(_PTX_COLOURS):
+                out[c] = np.clip(block[:, 4 + k], 0, 255).astype(np.uint8)
+        yield out
+
+
 # --- text ------------------------------------------------------------------------------------
 
 
@@ -189,38 +225,61 @@ _E57_FIELDS = {  # E57 point field -> (attribute name, buffer type)
     "colorRed": ("red", None),
     "colorGreen": ("green", None),
     "colorBlue": ("blue", None),
-    "rowIndex": ("row_index", "i4"),
-    "columnIndex": ("column_index", "i4"),
+    "rowIndex": ("row_index", "q"),  # libE57 buffers: "q" is int64 ("l" is taken as 32-bit)
+    "columnIndex": ("column_index", "q"),
     "timeStamp": ("time_stamp", "f8"),
 }
 
 
 def _e57_scan(spec: Path) -> tuple[Any, int]:
     """The open E57 file and the index of the scan ``spec`` names (``FILE.e57#K``)."""
-    try:
-        import pye57
-    except ImportError:
-        raise InputError("reading E57 needs pye57: pip install 'ndt-cli[e57]'", spec) from None
+    from ndt_cli.io.e57 import open_file
+    from ndt_cli.io.multiscan import which_scan
+
     path, index = split_spec(spec)
-    e57 = pye57.E57(str(path))
-    count = int(e57.scan_count)
-    if count == 0 or (index is None and count > 1) or (index is not None and index >= count):
+    e57 = open_file(path)
+    try:
+        return e57, which_scan(path, index, int(e57.scan_count), str(spec))
+    except BaseException:
         e57.close()
-        what = f"no scan #{index}" if index is not None else "no single scan: name one as FILE#K"
-        raise InputError(f"{what} (the file holds {count})", spec)
-    return e57, index or 0
+        raise
+
+
+def _number(node: Any) -> float:
+    """The value of an E57 Integer, ScaledInteger or Float node."""
+    from pye57 import libe57
+
+    kinds = {
+        libe57.E57_INTEGER: lambda n: libe57.IntegerNode(n).value(),
+        libe57.E57_SCALED_INTEGER: lambda n: libe57.ScaledIntegerNode(n).scaledValue(),
+        libe57.E57_FLOAT: lambda n: libe57.FloatNode(n).value(),
+    }
+    return float(kinds[node.type()](node))
 
 
 def _limits(header: Any, node: str, lo: str, hi: str) -> tuple[float, float] | None:
     if node not in header.scan_fields:
         return None
-    return float(header[node][lo].value()), float(header[node][hi].value())
+    limits = header[node]
+    if not (limits.isDefined(lo) and limits.isDefined(hi)):
+        return None
+    return _number(limits.get(lo)), _number(limits.get(hi))
+
+
+def _colour_type(header: Any) -> np.dtype:
+    """8 bits, or 16 when the colour field (or the scan's colour limits) goes above 255."""
+    from pye57 import libe57
+
+    top = _limits(header, "colorLimits", "colorRedMinimum", "colorRedMaximum")
+    field = libe57.StructureNode(header.points.prototype()).get("colorRed")
+    if field.type() == libe57.E57_INTEGER:
+        top = (0.0, max(top[1] if top else 0.0, float(libe57.IntegerNode(field).maximum())))
+    return np.dtype("u1" if top is None or top[1] <= 255 else "u2")
 
 
 def _e57_layout(header: Any) -> tuple[list[tuple[str, str, np.dtype]], tuple[float, float] | None]:
     """(E57 field, attribute name, dtype) of every kept attribute, and the intensity limits."""
-    colours = _limits(header, "colorLimits", "colorRedMinimum", "colorRedMaximum")
-    colour_type = np.dtype("u1" if colours is None or colours[1] <= 255 else "u2")
+    colour_type = _colour_type(header) if "colorRed" in header.point_fields else np.dtype("u1")
     fields = []
     for field, (name, t) in _E57_FIELDS.items():
         if field in header.point_fields:

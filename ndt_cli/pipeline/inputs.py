@@ -30,10 +30,23 @@ class ChainInputs:
 
 def campaign_scans(scans: Sequence[str | Path]) -> list[Path]:
     """The scans in campaign order: natural order of their names, each E57 file expanded into
-    its scans (``FILE.e57#K``)."""
-    from ndt_cli.io.e57 import expand
+    its scans (``FILE.e57#K``; PTX files likewise)."""
+    from ndt_cli.io.multiscan import expand
 
     return expand(natural_sort(scans))
+
+
+def refuse_twice(paths: Sequence[Path]) -> None:
+    """Raise when two paths name one scan (the same file, or the same scan of one E57)."""
+    from ndt_cli.io.multiscan import split_spec
+
+    seen: dict[tuple[Path, int | None], Path] = {}
+    for p in paths:
+        file, index = split_spec(p)
+        key = (file.resolve(), index)
+        if key in seen:
+            raise InputError(f"the same scan as {seen[key]}: give every scan once", p)
+        seen[key] = p
 
 
 def anchor_index(anchor: str, names: Sequence[str]) -> int:
@@ -74,6 +87,7 @@ def chain_inputs(
     paths = campaign_scans(scans)
     if len(paths) < 2:
         raise InputError("ndt-chain needs at least two scans")
+    refuse_twice(paths)
     names = scan_names(paths)
     index = anchor_index(anchor, names)
     net = network_options(neighbours, adjust, radius, pairs, names)

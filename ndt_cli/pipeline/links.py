@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from ndt_cli.io import atomic
+from ndt_cli.io.matrices import rigid_problem
 from ndt_cli.io.serialize import to_json
 from ndt_cli.ndt.bnb import ScoreField
 from ndt_cli.ndt.overlap import Sketch
@@ -120,10 +121,14 @@ class LinkStore:
         atomic.write_text(self.path(link.key), to_json(record))
 
     def load(self, key: str) -> Link | None:
-        """The finished link whose inputs had this ``key``, else None."""
+        """The finished link whose inputs had this ``key``, else None (also when its file is
+        damaged: unreadable, or a transform that is not rigid; it is registered again)."""
         try:
             link = Link.from_dict(json.loads(self.path(key).read_text(encoding="utf-8")))
-        except (OSError, ValueError, TypeError, KeyError):
+        except (OSError, ValueError, TypeError, KeyError, AttributeError):
+            return None
+        T = link.T_target_source
+        if T is not None and rigid_problem(T, tol=1e-6):  # damaged: registered again
             return None
         return link if link.key == key else None
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ndt_cli.errors import InputError, read_user_text
+from ndt_cli.errors import InputError
 
 RADIUS_FACTOR = 2.2  # default radius: this times the median distance of a scan to its nearest
 Pair = tuple[int, int]  # an unordered pair of scans, lower index first
@@ -140,32 +140,68 @@ def _spanning_tree(ids: list[int], d: np.ndarray, failed: set[Pair]) -> set[Pair
 
 def read_pairs(path: Path, names: Sequence[str]) -> list[PlannedLink]:
     """User pairs from a CSV of ``target,source`` rows (scan names as the outputs show them,
-    file names, or 0-based indices; a header row and ``#`` comments are allowed)."""
+    file names, or 0-based indices; a header row, a UTF-8 byte order mark and ``#`` comments
+    are allowed), one link per unordered pair (the first row wins). The file is streamed:
+    memory grows with the distinct pairs, not with the rows."""
     lookup = {name: k for k, name in enumerate(names)}
     lookup.update({Path(name).name: k for k, name in enumerate(names)})
-    rows = csv.reader(read_user_text(path, "pairs").splitlines())
-    links = []
-    for number, row in enumerate(rows, 1):
-        cells = [c.strip() for c in row]
-        if not cells or not cells[0] or cells[0].startswith("#"):
-            continue
-        if len(cells) < 2:
-            raise InputError(f"line {number}: expected 'target,source'", path)
-        ends = [_scan_index(c, lookup, len(names)) for c in cells[:2]]
-        if None in ends:
-            if number == 1:
-                continue  # a header
-            raise InputError(f"line {number}: no scan named {cells[ends.index(None)]!r}", path)
-        if ends[0] == ends[1]:
-            raise InputError(f"line {number}: a scan cannot be registered onto itself", path)
-        links.append(PlannedLink(ends[0], ends[1], LinkKind.USER))
-    return links
+    links: dict[tuple[int, int], PlannedLink] = {}
+    try:
+        with open(path, encoding="utf-8-sig", newline="") as fh:
+            for number, row in enumerate(csv.reader(fh), 1):
+                link = _pair_row(number, [c.strip() for c in row], lookup, len(names), path)
+                if link is not None:
+                    links.setdefault(
+                        (min(link.target, link.source), max(link.target, link.source)), link
+                    )
+    except FileNotFoundError:
+        raise InputError("pairs file not found", path) from None
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        reason = getattr(exc, "strerror", None) or " ".join(str(exc).split())
+        raise InputError(f"cannot read pairs ({reason})", path) from None
+    return list(links.values())
+
+
+def _pair_row(
+    number: int, cells: list[str], lookup: dict[str, int], n: int, path: Path
+) -> PlannedLink | None:
+    """The link of one row of a pairs file; None for an empty row, a comment or a header (a
+    first row of which no cell names or looks like a scan)."""
+    if not cells or not cells[0] or cells[0].startswith("#"):
+        return None
+    if len(cells) < 2:
+        raise InputError(f"line {number}: expected 'target,source'", path)
+    ends = [_scan_index(c, lookup, n) for c in cells[:2]]
+    if None in ends:
+        scan_like = any(
+            e is not None or _looks_like_scan(c) for e, c in zip(ends, cells, strict=False)
+        )
+        if number == 1 and not scan_like:
+            return None  # a header
+        bad = cells[ends.index(None)]
+        what = (
+            f"no scan with index {bad} (0..{n - 1})" if _digits(bad) else f"no scan named {bad!r}"
+        )
+        raise InputError(f"line {number}: {what}", path)
+    if ends[0] == ends[1]:
+        raise InputError(f"line {number}: a scan cannot be registered onto itself", path)
+    return PlannedLink(ends[0], ends[1], LinkKind.USER)
+
+
+def _digits(cell: str) -> bool:
+    """0-9 only (``str.isdigit`` is true for superscripts, which ``int`` refuses)."""
+    return cell.isascii() and cell.isdigit()
+
+
+def _looks_like_scan(cell: str) -> bool:
+    """An index, or a name with an extension or a folder: a typo, never a header's word."""
+    return _digits(cell) or any(c in cell for c in "./\\#")
 
 
 def _scan_index(cell: str, lookup: dict[str, int], n: int) -> int | None:
     if cell in lookup:
         return lookup[cell]
-    return int(cell) if cell.isdigit() and int(cell) < n else None
+    return int(cell) if _digits(cell) and int(cell) < n else None
 
 
 def merge(links: Iterable[PlannedLink]) -> list[PlannedLink]:

@@ -3,7 +3,7 @@
 Scans are taken in natural order of their file names (``scan_2`` before ``scan_10``; ties broken
 by the folder). A scan is named by its file name in every output, or, where two scans share a
 file name, by as much of its path as tells them apart; the scans of a multi-scan E57 file are
-``FILE.e57#K``.
+``FILE.e57#K``. The files written per scan and per link are named in :mod:`ndt_cli.io.names`.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ def natural_sort(paths: Sequence[str | Path]) -> list[Path]:
 
 def file_hash(path: Path) -> str:
     """SHA-256 of a scan's file bytes (and its scan number in an E57); 'missing' if unreadable."""
-    from ndt_cli.io.e57 import split_spec
+    from ndt_cli.io.multiscan import split_spec
 
     file, index = split_spec(path)
     h = hashlib.sha256(b"" if index is None else f"#{index}".encode())
@@ -61,20 +61,3 @@ def scan_names(paths: Sequence[Path]) -> list[str]:
             names = [str(p) for p in paths]
             break
     return names
-
-
-def file_stem(name: str) -> str:
-    """A scan name as part of a file name: no folders, no extension, ``#`` as ``_``.
-
-    ``scan_00.laz`` -> ``scan_00``; ``campaign.e57#2`` -> ``campaign_2``;
-    ``north/scan_1.laz`` -> ``north_scan_1``.
-    """
-    head, _, index = name.partition("#")
-    stem = head.rsplit(".", 1)[0] if "." in Path(head).name else head
-    stem = stem.replace("/", "_").replace("\\", "_")
-    return f"{stem}_{index}" if index else stem
-
-
-def link_file_name(target: str, source: str) -> str:
-    """File of a link's 4x4 ``T_target_source``: ``T_<target>_<source>.txt``."""
-    return f"T_{file_stem(target)}_{file_stem(source)}.txt"

@@ -14,7 +14,7 @@ import numpy as np
 
 from ndt_cli.config.schema import Config
 from ndt_cli.errors import NdtError
-from ndt_cli.io.e57 import split_spec
+from ndt_cli.io.multiscan import split_spec
 from ndt_cli.ndt.overlap import Sketch, sketch
 from ndt_cli.ndt.prepare import PreparedScan, load_and_prepare
 from ndt_cli.ndt.register import register_prepared

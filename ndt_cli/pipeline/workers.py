@@ -7,10 +7,13 @@ tasks to the same run as results come in (a link starts as soon as its two scans
 
 from __future__ import annotations
 
+import logging
 import os
 from collections.abc import Callable, Hashable, Iterator
 from enum import StrEnum
 from typing import Any
+
+log = logging.getLogger(__name__)
 
 Task = Callable[[], Any]
 Then = Callable[[Hashable, Any], dict[Hashable, Task]]  # more tasks, given a finished one
@@ -30,8 +33,12 @@ def threads_per_job(jobs: int) -> int:
 
 
 def default_jobs(jobs: int | None) -> int:
-    """``jobs``, or one per core when not given."""
-    return max(1, jobs or os.cpu_count() or 1)
+    """``jobs``, or one per core when not given; never more than one per core (the tasks are
+    bound by the processor: more processes would only take more memory)."""
+    cores = os.cpu_count() or 1
+    if jobs is not None and jobs > cores:
+        log.info("--jobs %d: %d processes, one per core of this machine", jobs, cores)
+    return max(1, min(jobs or cores, cores))
 
 
 def set_threads(threads: int) -> None:

@@ -11,12 +11,13 @@ import numpy as np
 
 from ndt_cli.config.loading import dump
 from ndt_cli.config.schema import Config
-from ndt_cli.io.matrices import format_matrix, format_pose_line
+from ndt_cli.io.matrices import format_matrix, format_pose_line, quote_name
+from ndt_cli.io.names import link_file_names, pose_file_names
 from ndt_cli.io.outdir import publish
 from ndt_cli.io.serialize import csv_text, to_json
 from ndt_cli.ndt.result import Status
 from ndt_cli.pipeline.campaign import ChainResult
-from ndt_cli.pipeline.scans import file_stem, link_file_name
+from ndt_cli.pipeline.scans import file_hash
 from ndt_cli.pipeline.solution import ScanPose
 from ndt_cli.pipeline.verify import NodeStatus
 from ndt_cli.report.html_report import chain_report
@@ -33,6 +34,9 @@ def summary(result: ChainResult, runtime_s: float) -> dict[str, Any]:
     return {
         "scans": [str(p) for p in result.scans],
         "scan_files": [str(p.resolve()) for p in result.scans],
+        "scan_sha256": [file_hash(p) for p in result.scans],
+        "pose_files": dict(zip(result.names, pose_file_list(result), strict=True)),
+        "transform_files": link_file_list(result),
         "anchor": result.anchor,
         "links": len(result.links),
         "ok": statuses.count(Status.OK),
@@ -75,7 +79,7 @@ def _count(values: Any) -> dict[str, int]:
 def _pose_lines(names: Any, poses: Any, what: str, anchor: str) -> list[str]:
     return [
         f"# {what}: file name, then 16 numbers of the 4x4, row-major (metres)",
-        f"# world frame = frame of {anchor}; scans without a pose omitted",
+        f"# world frame = frame of {quote_name(anchor)}; scans without a pose omitted",
         *(format_pose_line(n, T) for n, T in zip(names, poses, strict=True) if T is not None),
     ]
 
@@ -86,7 +90,7 @@ def poses_text(result: ChainResult) -> str:
     ok = [s.T_world_scan if s.anchored else None for s in sol.scans]
     lines = _pose_lines(result.names, ok, "T_world_scan per scan", result.names[result.anchor])
     lines += [
-        f"# {name}: {_why_not(s)}"
+        f"# {quote_name(name)}: {' '.join(_why_not(s).split())}"
         for name, s in zip(result.names, sol.scans, strict=True)
         if not s.anchored
     ]
@@ -108,19 +112,34 @@ def chained_text(result: ChainResult) -> str:
     return "\n".join(lines) + "\n"
 
 
+def pose_file_list(result: ChainResult) -> list[str]:
+    """The ``poses/T_world_<scan>.txt`` file of every scan ('' for a scan not posed in the
+    anchor's frame; names: :func:`pose_file_names`)."""
+    names = pose_file_names(result.names)
+    anchored = [s.anchored for s in result.solution.scans]
+    return [n if good else "" for n, good in zip(names, anchored, strict=True)]
+
+
 def pose_files(result: ChainResult) -> dict[str, str]:
-    """``poses/T_world_<scan>.txt`` per ok scan: a 4x4 that CloudCompare's ``-APPLY_TRANS``
-    and PDAL's ``filters.transformation`` read as it is."""
-    return {
-        f"poses/T_world_{file_stem(name)}.txt": format_matrix(s.T_world_scan)
-        for name, s in zip(result.names, result.solution.scans, strict=True)
-        if s.anchored
-    }
+    """The pose file of every scan posed in the anchor's frame: a 4x4 that CloudCompare's
+    ``-APPLY_TRANS`` and PDAL's ``filters.transformation`` read as it is."""
+    names = pose_file_list(result)
+    scans = result.solution.scans
+    return {n: format_matrix(s.T_world_scan) for n, s in zip(names, scans, strict=True) if n}
+
+
+def link_file_list(result: ChainResult) -> list[str]:
+    """The ``T_<target>_<source>.txt`` file of every link ('' for a link without a transform;
+    names: :func:`link_file_names`)."""
+    names = link_file_names(result.names, [(k.target, k.source) for k in result.links])
+    return [
+        n if k.T_target_source is not None else "" for n, k in zip(names, result.links, strict=True)
+    ]
 
 
 def _header_poses_text(result: ChainResult) -> str | None:
     """The poses stored in E57 scan headers (reported only: registration never uses them)."""
-    from ndt_cli.io.e57 import header_poses
+    from ndt_cli.io.multiscan import header_poses
 
     stored = header_poses(list(result.scans))
     if not stored:
@@ -145,7 +164,7 @@ def _levels(result: ChainResult) -> dict[int, np.ndarray]:
 
 def chain_files(result: ChainResult, cfg: Config, runtime_s: float) -> dict[str, str]:
     """Every text output of a chain, by file name."""
-    names, sol = result.names, result.solution
+    names, sol, transforms = result.names, result.solution, link_file_list(result)
     pairs = [pair_row(k, names, f) for k, f in zip(result.links, sol.links, strict=True)]
     level = _levels(result)
     poses = [
@@ -159,9 +178,8 @@ def chain_files(result: ChainResult, cfg: Config, runtime_s: float) -> dict[str,
         "poses_chain.txt": chained_text(result),
         **pose_files(result),
     }
-    for link in result.links:
-        if link.T_target_source is not None:
-            name = link_file_name(names[link.target], names[link.source])
+    for link, name in zip(result.links, transforms, strict=True):
+        if name:
             files[name] = format_matrix(link.T_target_source)
     header = _header_poses_text(result)
     if header is not None:

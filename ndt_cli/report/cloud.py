@@ -4,32 +4,53 @@ An ``ndt-chain`` folder names its scans' files in ``summary.json`` and their sta
 ``T_world_scan`` in ``poses.csv``; an ``ndt-register`` folder names both files in
 ``result.json`` (the target's frame is the world). ``config_used.yaml`` says how each file's
 coordinates become the scanner frame (``input.scale``, ``input.axes``). Only ``ok`` scans are
-exported, ``suspect`` ones too when asked; ``unposed`` ones never.
+exported, ``suspect`` ones too when asked; ``unposed`` ones (and a pair's ``degenerate``,
+``not_converged`` or ``no_overlap`` source) never.
+
+A result is trusted only as its run wrote it: every file read here must match the SHA-256 its
+manifest records, the files must agree with each other (the rows of poses.csv name the scans
+of summary.json in order), every pose must be a rigid transform, and every scan file must
+still be the one registered (the SHA-256 the result records). Anything else is an
+:class:`~ndt_cli.errors.InputError` naming the file and the problem.
 """
 
 from __future__ import annotations
 
-import csv
-import json
+import logging
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ndt_cli.config import load
-from ndt_cli.errors import InputError, read_user_text
+from ndt_cli.config.schema import Config
+from ndt_cli.errors import InputError
 from ndt_cli.io.export import ExportScan
+from ndt_cli.io.matrices import rigid_problem
+from ndt_cli.io.outdir import check_unchanged
+from ndt_cli.io.serialize import read_json_object, read_table
+from ndt_cli.pipeline.scans import file_hash, scan_names
+
+log = logging.getLogger(__name__)
+
+CHAIN_STATUSES = ("ok", "suspect", "unposed")
+PAIR_STATUSES = ("ok", "degenerate", "suspect", "not_converged", "no_overlap")
+MATRIX = tuple(f"m{r}{c}" for r in range(4) for c in range(4))
+POSE_TOLERANCE = 1e-6  # largest deviation of R R^T from the identity in a written pose
 
 
 @dataclass(frozen=True)
 class ResultScan:
-    """A scan of a result: its name, file, status, T_world_scan (None when unposed), reason."""
+    """A scan of a result: its name, file, status, T_world_scan (None when unposed), reason,
+    and the SHA-256 of its file when registered ('' when the result does not record it)."""
 
     name: str
     file: Path
     status: str
     T_world_scan: np.ndarray | None
     reason: str = ""
+    sha256: str = ""
 
 
 def _file(path: str) -> Path:
@@ -38,40 +59,113 @@ def _file(path: str) -> Path:
     return p if p.is_absolute() else Path.cwd() / p
 
 
+def _strings(value: Any, n: int | None, what: str, where: Path) -> list[str]:
+    """``value`` as a list of ``n`` non-empty strings (any length when None)."""
+    ok = isinstance(value, list) and all(isinstance(v, str) and v for v in value)
+    if not ok or (n is not None and len(value) != n):
+        count = "" if n is None else f" of {n}"
+        raise InputError(f"{what!r} is not a list{count} file names or hashes", where)
+    return value
+
+
+def _pose(row: dict[str, str], where: str, path: Path) -> np.ndarray:
+    """The rigid 4x4 of a poses.csv row."""
+    try:
+        T = np.array([float(row[m]) for m in MATRIX]).reshape(4, 4)
+    except ValueError:
+        raise InputError(f"{where}: a matrix cell is not a number", path) from None
+    problem = rigid_problem(T, POSE_TOLERANCE)
+    if problem:
+        raise InputError(f"{where}: T_world_scan: {problem}", path)
+    return T
+
+
+def _is_tail(name: str, file: str) -> bool:
+    """Whether the scan name is the end of its file's path (``north/scan.laz``)."""
+    return file == name or file.replace("\\", "/").endswith("/" + name)
+
+
+def _chain_row(row: dict[str, str], k: int, file: str, path: Path) -> ResultScan:
+    """Scan ``k`` of a chain from its row of poses.csv, checked against summary.json."""
+    where = f"row {k + 2} ({row['file']})"
+    if row["scan"] != str(k) or not _is_tail(row["file"], file):
+        raise InputError(f"{where} does not name scan {k} of summary.json ({file})", path)
+    if row["has_pose"] not in ("true", "false"):
+        raise InputError(f"{where}: has_pose is {row['has_pose']!r}, not true or false", path)
+    has = row["has_pose"] == "true"
+    status = row.get("status") or ("ok" if has else "unposed")
+    if status not in CHAIN_STATUSES or (status == "unposed") == has:
+        raise InputError(f"{where}: status {status!r} with has_pose {row['has_pose']}", path)
+    T = _pose(row, where, path) if has else None
+    reason = row.get("reason") or ""
+    if row.get("cluster") not in (None, "", "0"):  # posed in its own cluster's frame
+        status, reason = "other cluster", f"cluster {row['cluster']}: not tied to the anchor"
+    return ResultScan(row["file"], _file(file), status, T, reason)
+
+
 def _chain_scans(folder: Path) -> tuple[list[ResultScan], int]:
-    summary = json.loads(read_user_text(folder / "summary.json", "summary"))
-    files = summary.get("scan_files") or summary["scans"]
-    rows = list(csv.DictReader(read_user_text(folder / "poses.csv", "poses").splitlines()))
+    check_unchanged(folder, ("summary.json", "poses.csv", "poses.txt"))
+    summary = read_json_object(folder / "summary.json", "summary")
+    where = folder / "summary.json"
+    files = _strings(summary.get("scan_files") or summary.get("scans"), None, "scan_files", where)
+    hashes = summary.get("scan_sha256")
+    hashes = (
+        [""] * len(files) if hashes is None else _strings(hashes, len(files), "scan_sha256", where)
+    )
+    anchor = summary.get("anchor", 0)
+    if type(anchor) is not int or not 0 <= anchor < len(files):
+        raise InputError(f"anchor {anchor!r} is not a scan index", where)
+    path = folder / "poses.csv"
+    rows = read_table(path, "poses", ("scan", "file", "has_pose", *MATRIX))
     if len(rows) != len(files):
         raise InputError("poses.csv and summary.json list different scans", folder)
-    anchor = int(summary.get("anchor", 0))
-    scans = []
-    for row, f in zip(rows, files, strict=True):
-        has = row["has_pose"] == "true"
-        T = np.array([float(row[f"m{r}{c}"]) for r in range(4) for c in range(4)]).reshape(4, 4)
-        status = row.get("status") or ("ok" if has else "unposed")
-        reason = row.get("reason", "")
-        if row.get("cluster") not in (None, "", "0"):  # posed in its own cluster's frame
-            status, reason = "other cluster", f"cluster {row['cluster']}: not tied to the anchor"
-        scans.append(ResultScan(row["file"], _file(f), status, T if has else None, reason))
-    return scans, anchor
+    scans = [
+        _chain_row(row, k, f, path) for k, (row, f) in enumerate(zip(rows, files, strict=True))
+    ]
+    if len({s.name for s in scans}) != len(scans):
+        raise InputError("two rows name the same scan", path)
+    return [_with_hash(s, h) for s, h in zip(scans, hashes, strict=True)], anchor
+
+
+def _with_hash(scan: ResultScan, sha256: str) -> ResultScan:
+    return ResultScan(scan.name, scan.file, scan.status, scan.T_world_scan, scan.reason, sha256)
 
 
 def _pair_scans(folder: Path) -> tuple[list[ResultScan], int]:
-    data = json.loads(read_user_text(folder / "result.json", "result"))
-    T = np.array(data["T_target_source"], dtype=float)
-    files = [data.get("target_file") or data["target"], data.get("source_file") or data["source"]]
-    status = "ok" if data["status"] == "ok" else "suspect"
-    reason = "; ".join(data.get("warnings", []))
+    check_unchanged(folder, ("result.json",))
+    path = folder / "result.json"
+    data = read_json_object(path, "result")
+    ends = [
+        data.get("target_file") or data.get("target"),
+        data.get("source_file") or data.get("source"),
+    ]
+    files = _strings(ends, 2, "target and source", path)
+    if "<array>" in files:
+        raise InputError("registered from arrays: no scan files to export", path)
+    status = data.get("status")
+    if status not in PAIR_STATUSES:
+        raise InputError(f"status {status!r} is not one of {', '.join(PAIR_STATUSES)}", path)
+    try:
+        T = np.array(data.get("T_target_source"), dtype=float)
+    except (TypeError, ValueError):
+        raise InputError("T_target_source is not a 4x4 matrix of numbers", path) from None
+    problem = rigid_problem(T, POSE_TOLERANCE)
+    if problem:
+        raise InputError(f"T_target_source: {problem}", path)
+    hashes = [data.get(f"{end}_sha256") or "" for end in ("target", "source")]
+    warnings = data.get("warnings") or []
+    reason = "; ".join(map(str, warnings)) if isinstance(warnings, list) else str(warnings)
+    names = scan_names([Path(f) for f in files])
     return [
-        ResultScan(Path(files[0]).name, _file(files[0]), "ok", np.eye(4)),
-        ResultScan(Path(files[1]).name, _file(files[1]), status, T, reason),
+        ResultScan(names[0], _file(files[0]), "ok", np.eye(4), "", str(hashes[0])),
+        ResultScan(names[1], _file(files[1]), status, T, reason, str(hashes[1])),
     ], 0
 
 
 def result_scans(folder: Path) -> tuple[list[ResultScan], int]:
     """The scans of an ``ndt-chain`` or ``ndt-register`` result folder, and the anchor's index
-    (the scan whose frame is the world, and whose CRS the exports carry)."""
+    (the scan whose frame is the world, and whose CRS the exports carry), checked (see the
+    module docstring)."""
     if (folder / "summary.json").exists():
         return _chain_scans(folder)
     if (folder / "result.json").exists():
@@ -79,12 +173,27 @@ def result_scans(folder: Path) -> tuple[list[ResultScan], int]:
     raise InputError("not an ndt-chain or ndt-register result folder", folder)
 
 
+def result_config(folder: Path) -> Config:
+    """The config the result was made with (``config_used.yaml``, checked unchanged)."""
+    path = folder / "config_used.yaml"
+    if not path.is_file():
+        raise InputError(
+            "no config_used.yaml: how the scan files' coordinates become the scanner frame "
+            "(input.scale, input.axes) is unknown",
+            folder,
+        )
+    check_unchanged(folder, ("config_used.yaml",))
+    return load(path)
+
+
 def select(
     scans: list[ResultScan], names: list[str] | None, include_suspect: bool
 ) -> tuple[list[int], list[str]]:
     """Indices of the scans to export, and one line per scan left out (why)."""
     wanted = set(range(len(scans)))
-    if names:
+    if names is not None:
+        if not any(names):
+            raise InputError("--scans is empty: name the scans to export, or leave it out")
         lookup = {s.name: k for k, s in enumerate(scans)} | {str(k): k for k in range(len(scans))}
         unknown = [n for n in names if n not in lookup]
         if unknown:
@@ -102,14 +211,28 @@ def select(
     return keep, left
 
 
+def check_scan_files(scans: list[ResultScan], keep: list[int]) -> None:
+    """Raise unless every kept scan's file is the one registered (its SHA-256); a result that
+    records no hash (made by an older ndt-cli) is exported with a warning."""
+    for k in keep:
+        scan = scans[k]
+        if not scan.sha256:
+            log.warning("%s: the result records no SHA-256 of this file: not checked", scan.file)
+            continue
+        if file_hash(scan.file) != scan.sha256:
+            raise InputError(
+                "not the file that was registered (its SHA-256 differs from the result's): "
+                "register it again",
+                scan.file,
+            )
+
+
 def export_scans(
-    folder: Path, keep: list[int], scans: list[ResultScan], anchor: int
+    keep: list[int], scans: list[ResultScan], anchor: int, cfg: Config
 ) -> list[ExportScan]:
-    """The scans to export with their poses and the input transform of the run's config; the
-    anchor (or, when it is left out, the first exported scan) gives the CRS."""
-    cfg = load(folder / "config_used.yaml") if (folder / "config_used.yaml").exists() else None
-    scale = 1.0 if cfg is None else cfg.input.scale
-    axes = "x,y,z" if cfg is None else cfg.input.axes
+    """The scans to export with their poses and the input transform of the run's config
+    (:func:`result_config`); the anchor (or, when it is left out, the first exported scan)
+    gives the CRS."""
     crs = anchor if anchor in keep else keep[0]
     return [
         ExportScan.from_pose(
@@ -117,8 +240,8 @@ def export_scans(
             scans[k].name,
             k,
             scans[k].T_world_scan,
-            scale=scale,
-            axes=axes,
+            scale=cfg.input.scale,
+            axes=cfg.input.axes,
             anchor=(k == crs),
         )
         for k in keep

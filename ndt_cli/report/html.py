@@ -11,7 +11,8 @@ The page needs nothing but itself: the CSS is inline, the figures are PNG data U
 JavaScript, and a Content-Security-Policy forbids every fetch but ``data:`` images. It prints
 on A4 (long cells wrap, table headers repeat, figures are not split). Status values are written
 as text and coloured (green ok, amber suspect or degenerate, red failed, rejected or unposed).
-Every value is HTML-escaped. Missing numbers (None, NaN) show as an en dash.
+Every value is HTML-escaped, its characters that are not printable (bidi controls) shown as
+escapes. Missing numbers (None, NaN) show as an en dash.
 """
 
 from __future__ import annotations
@@ -184,8 +185,11 @@ _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
 def _e(value: object) -> str:
-    """``value`` as HTML-escaped text (quotes too)."""
-    return html.escape(str(value), quote=True)
+    """``value`` as HTML-escaped text (quotes too); characters that are not printable (bidi
+    overrides and isolates, which would reverse the text around them, other invisible format
+    characters, controls, bytes of a name that is not UTF-8) are shown as ``\\uXXXX``."""
+    text = "".join(c if c.isprintable() or c in "\n\t" else f"\\u{ord(c):04x}" for c in str(value))
+    return html.escape(text, quote=True)
 
 
 def status_class(status: str) -> str:

@@ -14,16 +14,19 @@ from ndt_cli.io.matrices import format_matrix
 from ndt_cli.io.outdir import publish
 from ndt_cli.io.serialize import csv_text, to_json
 from ndt_cli.ndt.result import RegistrationResult
+from ndt_cli.pipeline.scans import file_hash
 from ndt_cli.report.html_report import register_report
 from ndt_cli.report.tables import REPORT_COLUMNS, report_row
 
 
 def _with_files(data: dict) -> dict:
-    """The result's dict plus the absolute paths of its scan files (for ``ndt-export``)."""
+    """The result's dict plus the absolute paths of its scan files and their SHA-256 (for
+    ``ndt-export``)."""
     for end in ("target", "source"):
         label = data.get(end)
         if label and label != "<array>":
             data[f"{end}_file"] = str(Path(label).resolve())
+            data[f"{end}_sha256"] = file_hash(Path(label))
     return data
 
 

@@ -1,0 +1,43 @@
+"""Why a scan is not ok, in the scans' names.
+
+The network states its reasons with indices (``posed only through unused link 2 (T_0_2)``,
+``only rejected links: 1, 4``, ``link 3-5 failed``): the edge index counts only the links the
+adjustment used. Every output shows them with the names of the scans instead
+(``posed only through unused link scan_00.laz <- scan_02.laz``).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import replace
+
+from ndt_cli.pipeline.campaign import ChainResult
+from ndt_cli.pipeline.solution import usable
+
+_VIA = re.compile(r"link (\d+) \(T_(\d+)_(\d+)\)")
+_REJECTED = re.compile(r"(only rejected links: )([\d, ]+)")
+_PAIR = re.compile(r"\blink (\d+)-(\d+)\b")
+
+
+def named_reason(reason: str, names: tuple[str, ...], used: list[tuple[int, int]]) -> str:
+    """``reason`` with its links named ``target <- source`` (``used``: the (target, source)
+    of the links the adjustment used, in its order)."""
+
+    def link(t: int, s: int) -> str:
+        return f"{names[t]} <- {names[s]}"
+
+    def rejected(m: re.Match) -> str:
+        edges = [int(k) for k in m[2].replace(" ", "").split(",") if k]
+        return m[1] + ", ".join(link(*used[k]) for k in edges if k < len(used))
+
+    text = _VIA.sub(lambda m: f"link {link(int(m[2]), int(m[3]))}", reason)
+    text = _REJECTED.sub(rejected, text)
+    return _PAIR.sub(lambda m: f"link {link(int(m[1]), int(m[2]))}", text)
+
+
+def with_named_reasons(result: ChainResult) -> ChainResult:
+    """``result`` with every scan's reason naming its links by the scans' names."""
+    used = [(k.target, k.source) for k in result.links if usable(k)]
+    sol = result.solution
+    scans = tuple(replace(s, reason=named_reason(s.reason, result.names, used)) for s in sol.scans)
+    return replace(result, solution=replace(sol, scans=scans))
