@@ -12,6 +12,8 @@ from ndt_cli.cli.common import (
     EXIT_CODES,
     FORMATS,
     ConfigOpt,
+    ControlOpt,
+    CrsOpt,
     DebugOpt,
     JobsOpt,
     JsonOpt,
@@ -50,7 +52,9 @@ _HELP = "\n\n".join(
         "rejected, and every scan gets a status (ok, suspect, unposed) and a pose with its "
         "uncertainty. The first scan (or --anchor) defines the world frame; poses.txt holds "
         "T_world_scan of the ok scans. --neighbours 1 --no-adjust is the classic chain in the "
-        "order of the names.",
+        "order of the names. --control gives stations of known coordinates (GNSS, a survey): "
+        "the world is then their coordinate system (--crs), and a station that disagrees "
+        "with the network is rejected and reported.",
         FORMATS,
         EXIT_CODES,
         "Examples:\n\n"
@@ -98,6 +102,8 @@ def chain(
         Path | None,
         typer.Option(help="CSV of target,source rows: more pairs to register (scan names)."),
     ] = None,
+    control: ControlOpt = None,
+    crs: CrsOpt = None,
     print_config: PrintConfigOpt = False,
     json_out: JsonOpt = False,
     quiet: QuietOpt = False,
@@ -119,8 +125,10 @@ def chain(
             adjust=adjust,
             radius=radius,
             pairs=pairs,
+            control=control,
+            crs=crs,
         )
-        check_out(out, *inputs.paths, pairs, config)
+        check_out(out, *inputs.paths, pairs, config, control)
         result, runtime = _run(inputs, cfg, opts)
     _show(result, runtime, out, json_out, quiet)
     if not result.ok:

@@ -67,6 +67,20 @@ RadiusOpt = Annotated[
         show_default="2.2 x the median distance between nearest scans",
     ),
 ]
+ControlOpt = Annotated[
+    Path | None,
+    typer.Option(
+        help="CSV of scan,x,y,z,sigma_xy,sigma_z rows: stations of known coordinates (m; "
+        "sigmas blank: 2 cm and 3 cm). The world is then their coordinate system.",
+    ),
+]
+CrsOpt = Annotated[
+    str | None,
+    typer.Option(
+        help="The coordinate system of --control: EPSG:NNNN, or a file holding WKT; written "
+        "into the exported LAS/LAZ.",
+    ),
+]
 JobsOpt = Annotated[
     int | None,
     typer.Option(

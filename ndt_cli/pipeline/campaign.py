@@ -87,6 +87,7 @@ class NetworkOptions:
     radius: float | None = None
     pairs: tuple[PlannedLink, ...] = ()
     controls: tuple[Control, ...] = ()  # stations of known coordinates (the world: theirs)
+    crs: str = ""  # the coordinate system of the stations, as WKT ("" when not given)
 
     @property
     def classic(self) -> bool:
@@ -106,6 +107,7 @@ class ChainResult:
     previews: dict[int, np.ndarray]  # thinned slice points (x, y, z) per scan, scan frame
     reused: tuple[int, ...] = ()  # links taken from an earlier run (--resume)
     radius: float = float("nan")  # m, the radius links were planned within
+    crs: str = ""  # the world's coordinate system as WKT, when control gave it
 
     @property
     def poses(self) -> tuple[np.ndarray | None, ...]:
@@ -201,6 +203,7 @@ class Campaign:
             self.unreadable,
             self.net.controls,
         )
+        _log_controls(solution)
         return ChainResult(
             scans=tuple(self.paths),
             names=tuple(scan_names(self.paths)),
@@ -211,6 +214,7 @@ class Campaign:
             previews={i: s.preview for i, s in sorted(self.summaries.items())},
             reused=tuple(k for k, link in enumerate(links) if link.key in self.reused),
             radius=self.radius,
+            crs=self.net.crs if solution.datum and solution.datum.frame == "control" else "",
         )
 
     def report(self, index: int, result: ChainResult) -> ScanReport:
@@ -619,6 +623,19 @@ def _rank(link: Link) -> tuple[int, float]:
     rank = 0 if link.ok else 1 if usable(link) else 2
     score = link.result.score_per_point if link.result is not None else 0.0
     return rank, -score
+
+
+def _log_controls(solution: NetworkSolution) -> None:
+    """A warning per control station the adjustment did not use, with its misfit."""
+    for fit in () if solution.datum is None else solution.datum.controls:
+        if not fit.used:
+            r = fit.residual
+            misfit = (
+                ""
+                if r is None
+                else " (adjusted - given: {:+.1f} {:+.1f} {:+.1f} cm)".format(*(100 * r))
+            )
+            log.warning("control station %s not used: %s%s", fit.control.name, fit.reason, misfit)
 
 
 def replace_all(scans: Sequence[int], links: dict[Pair, Link]) -> dict[int, Placed]:

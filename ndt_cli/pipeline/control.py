@@ -56,13 +56,21 @@ def _number(cell: str, what: str, default: float | None = None) -> float:
     return value
 
 
-def _row(cells: list[str], lookup: dict[str, int], names: Sequence[str]) -> Control:
+@dataclass(frozen=True)
+class Station:
+    """A row of a control file before its scan is known: the name it gives, its line."""
+
+    name: str
+    line: int
+    xyz: np.ndarray
+    sigma_xy: float
+    sigma_z: float
+
+
+def _row(cells: list[str], number: int) -> Station:
     """One station from its cells (ValueError with the problem)."""
     if len(cells) < 4:
         raise ValueError("expected 'scan,x,y,z' and optionally 'sigma_xy,sigma_z'")
-    if cells[0] not in lookup:
-        raise ValueError(f"no scan named {cells[0]!r}")
-    k = lookup[cells[0]]
     xyz = np.array([_number(c, w) for c, w in zip(cells[1:4], "xyz", strict=True)])
     sig = [
         _number(c, w, d)
@@ -75,16 +83,14 @@ def _row(cells: list[str], lookup: dict[str, int], names: Sequence[str]) -> Cont
     ]
     if min(sig) <= 0:
         raise ValueError("standard deviations must be positive")
-    return Control(k, names[k], xyz, sig[0], sig[1])
+    return Station(cells[0], number, xyz, sig[0], sig[1])
 
 
-def read_control(path: str | Path, names: Sequence[str]) -> tuple[Control, ...]:
-    """The stations of a control file (see the module docstring); ``names``: the campaign's
-    scan names, as the outputs show them."""
+def read_stations(path: str | Path) -> tuple[Station, ...]:
+    """The rows of a control file, checked but not yet matched to scans (field mode reads the
+    file before the scans land)."""
     p = Path(path)
-    lookup = {name: k for k, name in enumerate(names)}
-    lookup.update({Path(name.split("#")[0]).name: k for k, name in enumerate(names)})
-    out: list[Control] = []
+    out: list[Station] = []
     for number, row in enumerate(csv.reader(read_user_text(p, "control").splitlines()), 1):
         cells = [c.strip() for c in row]
         if not cells or not cells[0] or cells[0].startswith("#"):
@@ -92,12 +98,39 @@ def read_control(path: str | Path, names: Sequence[str]) -> tuple[Control, ...]:
         if number == 1 and tuple(c.lower() for c in cells) == COLUMNS[: len(cells)]:
             continue  # the header
         try:
-            control = _row(cells, lookup, names)
+            station = _row(cells, number)
         except ValueError as exc:
             raise InputError(f"line {number}: {exc}", p) from None
-        if any(c.scan == control.scan for c in out):
-            raise InputError(f"line {number}: scan {cells[0]!r} is given twice", p)
-        out.append(control)
+        if any(s.name == station.name for s in out):
+            raise InputError(f"line {number}: scan {station.name!r} is given twice", p)
+        out.append(station)
     if not out:
         raise InputError("no station in the control file", p)
     return tuple(out)
+
+
+def matched(
+    stations: Sequence[Station], names: Sequence[str], path: Path | None = None
+) -> tuple[Control, ...]:
+    """The stations whose scan is one of ``names`` (the campaign's, as the outputs show them;
+    a scan's file name counts too). With ``path``, a station naming no scan is an error naming
+    its line; without, it waits (field mode: its scan has not landed yet)."""
+    lookup = {name: k for k, name in enumerate(names)}
+    lookup.update({Path(name.split("#")[0]).name: k for k, name in enumerate(names)})
+    out = []
+    for s in stations:
+        if s.name not in lookup:
+            if path is not None:
+                raise InputError(f"line {s.line}: no scan named {s.name!r}", path)
+            continue
+        k = lookup[s.name]
+        if any(c.scan == k for c in out):
+            raise InputError(f"line {s.line}: scan {s.name!r} is given twice", path)
+        out.append(Control(k, names[k], s.xyz, s.sigma_xy, s.sigma_z))
+    return tuple(out)
+
+
+def read_control(path: str | Path, names: Sequence[str]) -> tuple[Control, ...]:
+    """The stations of a control file (see the module docstring) matched to the campaign's
+    scans, ``names`` as the outputs show them; every station must name one."""
+    return matched(read_stations(path), names, Path(path))

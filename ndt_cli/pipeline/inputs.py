@@ -10,7 +10,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ndt_cli.errors import ConfigError, InputError
+from ndt_cli.io.crs import crs_wkt
 from ndt_cli.pipeline.campaign import NetworkOptions
+from ndt_cli.pipeline.control import read_control
 from ndt_cli.pipeline.network import read_pairs
 from ndt_cli.pipeline.scans import natural_sort, scan_names
 
@@ -62,16 +64,29 @@ def anchor_index(anchor: str, names: Sequence[str]) -> int:
 
 
 def network_options(
-    neighbours: int, adjust: bool, radius: float | None, pairs: Path | None, names: Sequence[str]
+    neighbours: int,
+    adjust: bool,
+    radius: float | None,
+    pairs: Path | None,
+    names: Sequence[str],
+    control: Path | None = None,
+    crs: str | None = None,
 ) -> NetworkOptions:
     """The network's options, checked; ``pairs``: a CSV of user pairs (see
-    :func:`~ndt_cli.pipeline.network.read_pairs`)."""
+    :func:`~ndt_cli.pipeline.network.read_pairs`); ``control``: a CSV of stations
+    (:mod:`ndt_cli.pipeline.control`) and ``crs`` their coordinate system."""
     if not 1 <= neighbours <= 10:
         raise ConfigError(f"--neighbours must be between 1 and 10, got {neighbours}")
     if radius is not None and not 0 < radius <= 1e4:
         raise ConfigError(f"--radius must be above 0 and at most 10000 m, got {radius}")
     user = tuple(read_pairs(pairs, names)) if pairs is not None else ()
-    return NetworkOptions(neighbours, adjust, radius, user)
+    stations = read_control(control, names) if control is not None else ()
+    if crs is not None and control is None:
+        raise ConfigError("--crs names the coordinate system of --control: give both")
+    if stations and not adjust:
+        raise ConfigError("--control needs the adjustment (not --no-adjust)")
+    wkt = crs_wkt(crs) if crs is not None else ""
+    return NetworkOptions(neighbours, adjust, radius, user, stations, wkt)
 
 
 def chain_inputs(
@@ -82,6 +97,8 @@ def chain_inputs(
     adjust: bool = True,
     radius: float | None = None,
     pairs: Path | None = None,
+    control: Path | None = None,
+    crs: str | None = None,
 ) -> ChainInputs:
     """Everything ``ndt-chain`` needs to know before it starts, checked."""
     paths = campaign_scans(scans)
@@ -90,7 +107,7 @@ def chain_inputs(
     refuse_twice(paths)
     names = scan_names(paths)
     index = anchor_index(anchor, names)
-    net = network_options(neighbours, adjust, radius, pairs, names)
+    net = network_options(neighbours, adjust, radius, pairs, names, control, crs)
     return ChainInputs(tuple(paths), index, net)
 
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from ndt_cli.config.loading import dump
 from ndt_cli.config.schema import Config
+from ndt_cli.io.crs import crs_name
 from ndt_cli.io.matrices import format_matrix, format_pose_line, quote_name
 from ndt_cli.io.names import link_file_names, pose_file_names
 from ndt_cli.io.outdir import publish
@@ -66,7 +67,55 @@ def summary(result: ChainResult, runtime_s: float) -> dict[str, Any]:
             },
             "radius_m": None if np.isnan(result.radius) else result.radius,
         },
+        "world": world_summary(result),
     }
+
+
+def world_summary(result: ChainResult) -> dict[str, Any]:
+    """What the world frame is (:mod:`ndt_cli.pipeline.datum`) and, per control station,
+    the given and adjusted coordinates of its scanner and their difference (cm)."""
+    datum = result.solution.datum
+    if datum is None:
+        return {"frame": f"the anchor's own: {result.names[result.anchor]}", "controls": []}
+    rows = []
+    for fit in datum.controls:
+        c, r = fit.control, fit.residual
+        rows.append(
+            {
+                "scan": c.name,
+                "given": c.xyz.tolist(),
+                "sigma_xy": c.sigma_xy,
+                "sigma_z": c.sigma_z,
+                "adjusted": None if fit.adjusted is None else fit.adjusted.tolist(),
+                "residual_cm": None if r is None else [round(100 * v, 2) for v in r],
+                "used": fit.used,
+                "reason": fit.reason,
+            }
+        )
+    return {
+        "frame": datum.frame,
+        "anchor": result.names[result.anchor],
+        "crs": result.crs or None,
+        "vertical_sigma_deg": datum.vertical_sigma_deg,
+        "controls": rows,
+    }
+
+
+def world_line(result: ChainResult) -> str:
+    """One line saying what the world frame of the poses is."""
+    anchor = quote_name(result.names[result.anchor])
+    datum = result.solution.datum
+    if datum is None:
+        return f"world frame = frame of {anchor}"
+    if datum.frame == "control":
+        used = sum(f.used for f in datum.controls)
+        where = crs_name(result.crs) if result.crs else "the control's coordinates"
+        return f"world frame = {where}, from {used} control station(s); z the vertical"
+    if datum.frame.startswith("control"):
+        return f"world frame = the control's coordinates at one station, heading of {anchor}"
+    if datum.frame == "levelled":
+        return f"world frame = frame of {anchor} tipped level about its ground point (z up)"
+    return f"world frame = frame of {anchor} (georeferenced: kept as it is)"
 
 
 def _count(values: Any) -> dict[str, int]:
@@ -76,10 +125,10 @@ def _count(values: Any) -> dict[str, int]:
     return out
 
 
-def _pose_lines(names: Any, poses: Any, what: str, anchor: str) -> list[str]:
+def _pose_lines(names: Any, poses: Any, what: str, world: str) -> list[str]:
     return [
         f"# {what}: file name, then 16 numbers of the 4x4, row-major (metres)",
-        f"# world frame = frame of {quote_name(anchor)}; scans without a pose omitted",
+        f"# {world}; scans without a pose omitted",
         *(format_pose_line(n, T) for n, T in zip(names, poses, strict=True) if T is not None),
     ]
 
@@ -88,7 +137,7 @@ def poses_text(result: ChainResult) -> str:
     """``poses.txt``: T_world_scan of every ok scan; the others as comments with the reason."""
     sol = result.solution
     ok = [s.T_world_scan if s.anchored else None for s in sol.scans]
-    lines = _pose_lines(result.names, ok, "T_world_scan per scan", result.names[result.anchor])
+    lines = _pose_lines(result.names, ok, "T_world_scan per scan", world_line(result))
     lines += [
         f"# {quote_name(name)}: {' '.join(_why_not(s).split())}"
         for name, s in zip(result.names, sol.scans, strict=True)
@@ -108,7 +157,8 @@ def chained_text(result: ChainResult) -> str:
     """``poses_chain.txt``: the poses of the plain chain of adjacent ok links, not adjusted
     (to compare with the adjusted ``poses.txt``)."""
     what = "T_world_scan chained along adjacent ok links (not adjusted)"
-    lines = _pose_lines(result.names, result.solution.chained, what, result.names[result.anchor])
+    world = f"world frame = frame of {quote_name(result.names[result.anchor])} (not levelled)"
+    lines = _pose_lines(result.names, result.solution.chained, what, world)
     return "\n".join(lines) + "\n"
 
 

@@ -73,8 +73,30 @@ def print_chain_summary(result: ChainResult, console: Any) -> None:
         for k, s in bad:
             scans.add_row(result.names[k], s.status.value, s.reason)
         console.print(scans)
+    _print_controls(result, console)
     n_ok = len(sol.scans) - len(bad)
     console.print(f"{n_ok} of {len(sol.scans)} scans ok" + (" (adjusted)" if sol.adjusted else ""))
+
+
+def _print_controls(result: Any, console: Any) -> None:
+    """The control stations: given and adjusted coordinates, residual (cm), used or not."""
+    from rich.table import Table
+
+    from ndt_cli.report.chain_outputs import world_line, world_summary
+
+    rows = world_summary(result)["controls"]
+    if rows:
+        table = Table("scan", "given x y z (m)", "residual E N h (cm)", "used", title="control")
+        for r in rows:
+            res = r["residual_cm"]
+            table.add_row(
+                r["scan"],
+                " ".join(f"{v:.3f}" for v in r["given"]),
+                "" if res is None else " ".join(f"{v:+.1f}" for v in res),
+                "yes" if r["used"] else f"no: {r['reason']}",
+            )
+        console.print(table)
+    console.print(world_line(result))
 
 
 def print_evaluation(ev: Any, console: Any) -> None:

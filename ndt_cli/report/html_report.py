@@ -68,6 +68,12 @@ def _link_row(result: ChainResult, link: Link, fit: LinkFit) -> LinkRow:
     )
 
 
+def _world_line(result: ChainResult) -> str:
+    from ndt_cli.report.chain_outputs import world_line
+
+    return world_line(result)
+
+
 def chain_report(result: ChainResult, config_yaml: str, runtime_s: float, topview: bytes) -> str:
     """The HTML report of an ``ndt-chain`` run, with its top view (PNG bytes)."""
     sol = result.solution
@@ -79,7 +85,8 @@ def chain_report(result: ChainResult, config_yaml: str, runtime_s: float, topvie
     solved = "adjusted; " if sol.adjusted else "chained, not adjusted; "
     summary = (
         ("scans", f"{len(sol.scans) - len(not_ok)} of {len(sol.scans)} ok"),
-        ("world frame", f"the frame of {result.names[result.anchor]} (anchor)"),
+        ("world frame", _world_line(result).removeprefix("world frame = ")),
+        *_control_rows(result),
         ("links", f"{len(result.links)}: " + _counts(k.kind.value for k in result.links)),
         ("network", solved + _counts(states)),
         ("link radius", "none" if np.isnan(result.radius) else f"{result.radius:.1f} m"),
@@ -97,6 +104,21 @@ def chain_report(result: ChainResult, config_yaml: str, runtime_s: float, topvie
         config_yaml=config_yaml,
         notes=_NOTES,
     )
+
+
+def _control_rows(result: ChainResult) -> tuple[tuple[str, str], ...]:
+    """A summary row per control station: its given coordinates, the adjusted minus the given
+    (cm: east, north, height) and whether the adjustment used it."""
+    from ndt_cli.report.chain_outputs import world_summary
+
+    rows = []
+    for r in world_summary(result)["controls"]:
+        given = " ".join(f"{v:.3f}" for v in r["given"])
+        res = r["residual_cm"]
+        misfit = "" if res is None else "; adjusted - given " + " ".join(f"{v:+.1f}" for v in res)
+        used = "used" if r["used"] else f"not used: {r['reason']}"
+        rows.append((f"control {r['scan']}", f"{given} m{misfit} cm; {used}"))
+    return tuple(rows)
 
 
 def register_report(result: RegistrationResult, config_yaml: str) -> str:
