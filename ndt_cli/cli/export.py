@@ -152,6 +152,7 @@ def _run(
 
     scans, anchor = cloud.result_scans(folder)
     cfg = cloud.result_config(folder)
+    crs = cloud.result_crs(folder)
     keep, left = cloud.select(scans, None if names is None else names.split(","), include_suspect)
     for line in left:
         log.warning("left out %s", line)
@@ -169,6 +170,7 @@ def _run(
             per_scan_dir=per_scan,
             progress=progress,
             protect=[s.file for s in scans],
+            crs=crs,
         )
     return {
         "files": [str(p) for p in res.paths],

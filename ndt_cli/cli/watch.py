@@ -12,6 +12,8 @@ from ndt_cli.cli.common import (
     EXIT_CODES,
     FORMATS,
     ConfigOpt,
+    ControlOpt,
+    CrsOpt,
     DebugOpt,
     JobsOpt,
     NeighboursOpt,
@@ -31,7 +33,7 @@ from ndt_cli.errors import EXIT_REGISTRATION
 
 if TYPE_CHECKING:
     from ndt_cli.config import Config
-    from ndt_cli.pipeline.campaign import Campaign, ChainResult, ScanReport
+    from ndt_cli.pipeline.campaign import Campaign, ChainResult, NetworkOptions, ScanReport
     from ndt_cli.pipeline.watch import Landed
 
 watch_app = new_app()
@@ -61,6 +63,8 @@ def watch(
     jobs: JobsOpt = None,
     neighbours: NeighboursOpt = 4,
     radius: RadiusOpt = None,
+    control: ControlOpt = None,
+    crs: CrsOpt = None,
     exit_when_idle: Annotated[
         float | None,
         typer.Option(
@@ -82,7 +86,8 @@ def watch(
     _one_line_per_scan()
     with user_errors("ndt-watch", debug, _STOPPED):
         cfg = load_config(config, print_config)
-        opts = _check(folder, out, jobs, neighbours, radius, exit_when_idle, interval, settle)
+        net = _network(neighbours, radius, control, crs)
+        opts = _check(folder, out, jobs, net, exit_when_idle, interval, settle, control)
         ok = _run(cfg, opts)
     if not ok:
         raise typer.Exit(EXIT_REGISTRATION)
@@ -102,26 +107,33 @@ class _Options:
     folder: Path
     out: Path
     jobs: int | None
-    neighbours: int
-    radius: float | None
+    net: NetworkOptions
     idle: float | None
     interval: float
     settle: float
+
+
+def _network(
+    neighbours: int, radius: float | None, control: Path | None, crs: str | None
+) -> NetworkOptions:
+    """The network's options, checked; the control stations wait for their scans to land."""
+    from ndt_cli.pipeline.inputs import network_options
+
+    return network_options(neighbours, True, radius, None, None, control, crs)
 
 
 def _check(
     folder: Path,
     out: Path,
     jobs: int | None,
-    neighbours: int,
-    radius: float | None,
+    net: NetworkOptions,
     idle: float | None,
     interval: float,
     settle: float,
+    control: Path | None,
 ) -> _Options:
     """The options, checked before any work."""
     from ndt_cli.errors import ConfigError, InputError
-    from ndt_cli.pipeline.inputs import network_options
 
     if not folder.is_dir():
         raise InputError("not a folder", folder)
@@ -132,9 +144,8 @@ def _check(
             raise ConfigError(f"{name} must be above 0 and at most 3600 s, got {value}")
     if idle is not None and not 0 < idle <= 1e6:
         raise ConfigError(f"--exit-when-idle must be above 0 s, got {idle}")
-    network_options(neighbours, True, radius, None, [])
-    check_out(out, folder)
-    return _Options(folder, out, jobs, neighbours, radius, idle, interval, settle)
+    check_out(out, folder, control)
+    return _Options(folder, out, jobs, net, idle, interval, settle)
 
 
 def _run(cfg: Config, opts: _Options) -> bool:
@@ -143,16 +154,15 @@ def _run(cfg: Config, opts: _Options) -> bool:
     import time
 
     from ndt_cli.io import SUPPORTED_SUFFIXES
-    from ndt_cli.pipeline.campaign import Campaign, NetworkOptions
+    from ndt_cli.pipeline.campaign import Campaign
     from ndt_cli.pipeline.executors import ExecutorKind, make_executor
     from ndt_cli.pipeline.watch import FolderWatch
 
     signal.signal(signal.SIGTERM, _interrupt)
     pool = make_executor(ExecutorKind.LOCAL, opts.jobs)
     pool.start()  # before this process starts threads of its own
-    net = NetworkOptions(neighbours=opts.neighbours, radius=opts.radius)
     campaign = Campaign(
-        cfg, opts.out, pool, network=net, resume=True, on_interrupt="start ndt-watch again"
+        cfg, opts.out, pool, network=opts.net, resume=True, on_interrupt="start ndt-watch again"
     )
     folder = FolderWatch(opts.folder, SUPPORTED_SUFFIXES, opts.settle)
     last, result = time.monotonic(), None

@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ndt_cli.errors import ConfigError, read_user_text
+from ndt_cli.io.records import RawVlr
 
 
 def crs_wkt(value: str) -> str:
@@ -31,3 +32,9 @@ def crs_name(wkt: str) -> str:
     crs = CRS.from_wkt(wkt)
     epsg = crs.to_epsg()
     return f"{crs.name} (EPSG:{epsg})" if epsg else crs.name
+
+
+def wkt_records(wkt: str) -> tuple[RawVlr, ...]:
+    """The LAS record holding ``wkt`` (``LASF_Projection`` 2112, null-terminated), as a
+    LAS 1.4 file with the WKT bit carries its coordinate system."""
+    return (RawVlr("LASF_Projection", 2112, "OGC coordinate system WKT", wkt.encode() + b"\0"),)

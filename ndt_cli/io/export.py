@@ -41,7 +41,7 @@ from ndt_cli.errors import InputError, NdtError, OutputError, one_line
 from ndt_cli.io.atomic import atomic_path
 from ndt_cli.io.names import per_scan_file_names
 from ndt_cli.io.outdir import check_shared_folder, record_shared_folder
-from ndt_cli.io.records import CHUNK_POINTS, Chunk, Summary, iter_records, summary
+from ndt_cli.io.records import CHUNK_POINTS, Chunk, RawVlr, Summary, iter_records, summary
 
 log = logging.getLogger(__name__)
 
@@ -316,16 +316,17 @@ def _make_sink(
     anchor: ExportScan,
     target: Path,
     chunk_points: int,
+    crs: tuple[RawVlr, ...] | None,
 ) -> Sink:
     if suffix in (".las", ".laz"):
         from ndt_cli.io.export_las import LasSink
 
-        return LasSink(tmp, inputs, _union_bounds(inputs), anchor, target)
+        return LasSink(tmp, inputs, _union_bounds(inputs), anchor, target, crs)
     from ndt_cli.io.export_other import E57Sink, PlySink
 
     if suffix == ".ply":
         return PlySink(tmp, inputs)
-    return E57Sink(tmp, inputs, anchor, chunk_points)
+    return E57Sink(tmp, inputs, anchor, chunk_points, crs)
 
 
 @dataclass
@@ -412,6 +413,7 @@ def _write_files(
     tally: _Tally,
     chunk_points: int,
     progress: Progress | None,
+    crs: tuple[RawVlr, ...] | None,
 ) -> list[int | None]:
     """Write ``groups[k]`` into ``targets[k]``: temporary files, renamed once all are complete
     (none is left on failure). Returns the LAS point format of each file (None: not LAS)."""
@@ -420,7 +422,7 @@ def _write_files(
         tmps = [stack.enter_context(atomic_path(t)) for t in targets]
         for tmp, group, t in zip(tmps, groups, targets, strict=True):
             with _writing(t):
-                sink = _make_sink(suffix, tmp, group, anchor, t, chunk_points)
+                sink = _make_sink(suffix, tmp, group, anchor, t, chunk_points, crs)
                 _write(sink, group, thinner, tally, chunk_points, progress)
             formats.append(getattr(sink, "point_format", None))
     return formats
@@ -462,6 +464,7 @@ def export(
     chunk_points: int = CHUNK_POINTS,
     progress: Progress | None = None,
     protect: Sequence[str | Path] = (),
+    crs: tuple[RawVlr, ...] | None = None,
 ) -> ExportResult:
     """Write the registered cloud of ``scans`` (see the module docstring) and say what was written.
 
@@ -470,7 +473,9 @@ def export(
     format (``out`` itself is not written). ``voxel``: thinning cube edge in metres (None: keep
     every point). ``chunk_points``: points read and written at a time. ``progress``: called
     after every chunk with (points read so far, points in all inputs). ``protect``: more files
-    that must not be written (the scans' own files never are).
+    that must not be written (the scans' own files never are). ``crs``: the CRS records the
+    outputs carry (LAS ``LASF_Projection`` records; E57 takes the WKT of record 2112), ``()``
+    for none; None: the anchor scan's, copied.
 
     Raises :class:`OutputError` (unwritable target, unsupported extension, incompatible extra
     bytes, extent too large) and :class:`InputError` (unreadable input), each one line naming the
@@ -495,7 +500,7 @@ def export(
     tally = _Tally(total=sum(i.count for i in inputs))
     with _removed_on_failure(None if per_scan_dir is None else Path(per_scan_dir)):
         formats = _write_files(
-            suffix, targets, groups, anchor_of(scans), thinner, tally, chunk_points, progress
+            suffix, targets, groups, anchor_of(scans), thinner, tally, chunk_points, progress, crs
         )
         if per_scan_dir is not None:
             record_shared_folder(Path(per_scan_dir), [t.name for t in targets])

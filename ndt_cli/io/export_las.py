@@ -21,8 +21,9 @@ at most 32 bits); otherwise :class:`OutputError`.
 
 ``scan_index`` (uint16 extra bytes) holds :attr:`ExportScan.index` of each point's scan;
 ``point_source_id`` is kept as the input had it. The CRS records (``LASF_Projection``) and the
-WKT bit of the anchor scan are copied byte for byte; a scan whose CRS records differ is logged as
-a warning. Scales are 1 mm, offsets the centre of the world bounding box (whole metres), so that
+WKT bit of the anchor scan are copied byte for byte (a scan whose CRS records differ is logged as
+a warning), unless the export is given the records of the world frame (a WKT of ``--crs``).
+Scales are 1 mm, offsets the centre of the world bounding box (whole metres), so that
 coordinates of millions of metres keep millimetres in the int32 range.
 """
 
@@ -267,13 +268,17 @@ class LasSink:
         bounds: tuple[np.ndarray, np.ndarray],
         anchor: ExportScan,
         target: Path,
+        crs: tuple[RawVlr, ...] | None = None,
     ) -> None:
         summaries = [i.summary for i in inputs]
         self.point_format = choose_point_format(summaries)
         self.extras = extra_dimensions(summaries, self.point_format)
         self.offsets = las_offsets(*bounds, target)
         self.target = target
-        crs, wkt = anchor_crs(inputs, anchor)
+        if crs is None:
+            crs, wkt = anchor_crs(inputs, anchor)
+        else:
+            wkt = any(v.record_id == 2112 for v in crs)
         gps = {i.summary.gps_standard for i in inputs if "gps_time" in i.summary.names}
         if len(gps) > 1:
             log.warning("%s: the scans mix GPS week time and standard GPS time", target)

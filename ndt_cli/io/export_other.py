@@ -15,7 +15,8 @@ else the values' range), colours (8 bits: LAS 16-bit colours are shifted right b
 colour value of the scan is above 255, known from a first pass over the scan, else taken as
 8-bit values), ``rowIndex`` /
 ``columnIndex`` and ``timeStamp`` (from an E57 ``time_stamp`` or a LAS ``gps_time``). The file's
-``coordinateMetadata`` is the anchor's WKT when it has one.
+``coordinateMetadata`` is the WKT of the world frame's coordinate system (``--crs``) when the
+export is given one, else the anchor's WKT when it has one.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ import numpy as np
 
 from ndt_cli.core.arrays import column_bounds
 from ndt_cli.errors import OutputError
-from ndt_cli.io.records import Chunk, Dimension, Summary
+from ndt_cli.io.records import Chunk, Dimension, RawVlr, Summary
 
 if TYPE_CHECKING:
     from ndt_cli.io.export import ExportScan, ScanInput
@@ -146,12 +147,13 @@ class PlySink:
 # --- E57 -------------------------------------------------------------------------------------
 
 
-def _wkt(inputs: Sequence[ScanInput], anchor: ExportScan) -> str:
-    """The anchor scan's WKT (LAS record 2112), or ''."""
+def _wkt(inputs: Sequence[ScanInput], anchor: ExportScan, crs: tuple[RawVlr, ...] | None) -> str:
+    """The WKT (LAS record 2112) of ``crs``, else of the anchor scan, or ''."""
     from ndt_cli.io.records import summary
 
-    item = next((i for i in inputs if i.scan is anchor), None)
-    crs = item.summary.crs if item is not None else summary(anchor.path).crs
+    if crs is None:
+        item = next((i for i in inputs if i.scan is anchor), None)
+        crs = item.summary.crs if item is not None else summary(anchor.path).crs
     wkt = next((v.data for v in crs if v.record_id == 2112), b"")
     return wkt.split(b"\0", 1)[0].decode("utf-8", errors="replace")
 
@@ -225,12 +227,17 @@ class E57Sink:
     """An E57 file being written, one scan per station (see the module docstring)."""
 
     def __init__(
-        self, tmp: Path, inputs: Sequence[ScanInput], anchor: ExportScan, capacity: int
+        self,
+        tmp: Path,
+        inputs: Sequence[ScanInput],
+        anchor: ExportScan,
+        capacity: int,
+        crs: tuple[RawVlr, ...] | None = None,
     ) -> None:
         self._e = _libe57()
         tmp.unlink()  # libE57 creates the file itself
         self._imf = self._e.ImageFile(str(tmp), "w")
-        _e57_root(self._imf, self._e, _wkt(inputs, anchor))
+        _e57_root(self._imf, self._e, _wkt(inputs, anchor, crs))
         self._capacity = max(1, capacity)
         self._item: ScanInput | None = None
         self._warned = False

@@ -38,7 +38,7 @@ from ndt_cli.errors import UserInterruptError, caused_by_interrupt
 from ndt_cli.ndt.overlap import COARSE_WINDOW, CoarseMatch, coarse_match
 from ndt_cli.ndt.prepare import PreparedScan
 from ndt_cli.ndt.result import Status
-from ndt_cli.pipeline.control import Control
+from ndt_cli.pipeline.control import Station, matched
 from ndt_cli.pipeline.discovery import (
     HINTS,
     Placed,
@@ -86,7 +86,8 @@ class NetworkOptions:
     adjust: bool = True
     radius: float | None = None
     pairs: tuple[PlannedLink, ...] = ()
-    controls: tuple[Control, ...] = ()  # stations of known coordinates (the world: theirs)
+    stations: tuple[Station, ...] = ()  # of known coordinates (the world: theirs); a station
+    # counts once its scan is in the campaign (field mode: the control file is read first)
     crs: str = ""  # the coordinate system of the stations, as WKT ("" when not given)
 
     @property
@@ -193,6 +194,7 @@ class Campaign:
     def result(self) -> ChainResult:
         """Solve the planned network: a pose and a status per scan."""
         links = self._network()
+        names = tuple(scan_names(self.paths))
         if self.net.adjust and links:
             progress.info("adjusting the network of %d link(s)", len(links))
         solution = solve(
@@ -201,12 +203,12 @@ class Campaign:
             links,
             self.net.adjust,
             self.unreadable,
-            self.net.controls,
+            matched(self.net.stations, names),
         )
         _log_controls(solution)
         return ChainResult(
             scans=tuple(self.paths),
-            names=tuple(scan_names(self.paths)),
+            names=names,
             links=tuple(links),
             solution=solution,
             anchor=self.anchor,

@@ -12,7 +12,7 @@ from pathlib import Path
 from ndt_cli.errors import ConfigError, InputError
 from ndt_cli.io.crs import crs_wkt
 from ndt_cli.pipeline.campaign import NetworkOptions
-from ndt_cli.pipeline.control import read_control
+from ndt_cli.pipeline.control import matched, read_stations
 from ndt_cli.pipeline.network import read_pairs
 from ndt_cli.pipeline.scans import natural_sort, scan_names
 
@@ -68,19 +68,22 @@ def network_options(
     adjust: bool,
     radius: float | None,
     pairs: Path | None,
-    names: Sequence[str],
+    names: Sequence[str] | None,
     control: Path | None = None,
     crs: str | None = None,
 ) -> NetworkOptions:
     """The network's options, checked; ``pairs``: a CSV of user pairs (see
     :func:`~ndt_cli.pipeline.network.read_pairs`); ``control``: a CSV of stations
-    (:mod:`ndt_cli.pipeline.control`) and ``crs`` their coordinate system."""
+    (:mod:`ndt_cli.pipeline.control`) and ``crs`` their coordinate system. ``names``: the
+    campaign's scans, every station must name one; None in field mode (scans yet to land)."""
     if not 1 <= neighbours <= 10:
         raise ConfigError(f"--neighbours must be between 1 and 10, got {neighbours}")
     if radius is not None and not 0 < radius <= 1e4:
         raise ConfigError(f"--radius must be above 0 and at most 10000 m, got {radius}")
-    user = tuple(read_pairs(pairs, names)) if pairs is not None else ()
-    stations = read_control(control, names) if control is not None else ()
+    user = tuple(read_pairs(pairs, names or [])) if pairs is not None else ()
+    stations = read_stations(control) if control is not None else ()
+    if names is not None and control is not None:
+        matched(stations, names, control)
     if crs is not None and control is None:
         raise ConfigError("--crs names the coordinate system of --control: give both")
     if stations and not adjust:

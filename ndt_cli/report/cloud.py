@@ -26,9 +26,11 @@ import numpy as np
 from ndt_cli.config import load
 from ndt_cli.config.schema import Config
 from ndt_cli.errors import InputError
+from ndt_cli.io.crs import wkt_records
 from ndt_cli.io.export import ExportScan
 from ndt_cli.io.matrices import rigid_problem
 from ndt_cli.io.outdir import check_unchanged
+from ndt_cli.io.records import RawVlr
 from ndt_cli.io.serialize import read_json_object, read_table
 from ndt_cli.pipeline.scans import file_hash, scan_names
 
@@ -171,6 +173,28 @@ def result_scans(folder: Path) -> tuple[list[ResultScan], int]:
     if (folder / "result.json").exists():
         return _pair_scans(folder)
     raise InputError("not an ndt-chain or ndt-register result folder", folder)
+
+
+def result_crs(folder: Path) -> tuple[RawVlr, ...] | None:
+    """The CRS records an export of the result carries: the WKT of ``--crs`` when the chain was
+    georeferenced with it (two or more stations); none when control coordinates made the world
+    without a named system, or with one station only (its heading is the anchor's, not the
+    system's): the anchor's records would not describe it; else None (the anchor's, copied)."""
+    path = folder / "summary.json"
+    if not path.exists():
+        return None
+    world = read_json_object(path, "summary").get("world")
+    frame = str(world.get("frame", "")) if isinstance(world, dict) else ""
+    if not frame.startswith("control"):
+        return None
+    wkt = world.get("crs")
+    if not wkt or frame != "control":
+        why = "one station: its heading is the anchor's" if wkt else "of no named CRS"
+        log.warning("%s: the world is the control's frame, %s: no CRS written", folder, why)
+        return ()
+    if not isinstance(wkt, str):
+        raise InputError("summary.json: world.crs is not a WKT text", path)
+    return wkt_records(wkt)
 
 
 def result_config(folder: Path) -> Config:

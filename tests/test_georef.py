@@ -1,0 +1,137 @@
+"""Georeferencing from the command line: a control file and its coordinate system given to
+``ndt-chain`` (or ``ndt-watch``), checked before any work, and a street that ends in those
+coordinates, its exported cloud carrying the system."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import laspy
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from ndt_cli import io, sim
+from ndt_cli.cli import chain_app, watch_app
+from ndt_cli.core.transforms import transform_errors
+from ndt_cli.errors import EXIT_INPUT
+from ndt_cli.io.matrices import read_pose_list
+from ndt_cli.pipeline.control import read_stations
+
+ENV = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+runner = CliRunner()
+EPSG = 25832  # ETRS89 / UTM zone 32N
+
+
+def _scans(tmp_path: Path, n: int = 2) -> list[str]:
+    """Stand-in scan files: the checks below come before any scan is read."""
+    files = []
+    for k in range(n):
+        files.append(str(tmp_path / f"scan_{k}.xyz"))
+        Path(files[-1]).write_text("0 0 0\n1 0 0\n0 1 0\n")
+    return files
+
+
+@pytest.mark.parametrize(
+    ("control", "extra", "needle"),
+    [
+        ("scan_7.xyz,1,2,3\n", [], "line 1: no scan named 'scan_7.xyz'"),
+        ("scan_0.xyz,1,2\n", [], "line 1: expected 'scan,x,y,z'"),
+        ("scan_0.xyz,1,2,3,-1,1\n", [], "standard deviations must be positive"),
+        ("scan_0.xyz,1,2,3\n", ["--crs", "EPSG:999999"], "--crs 'EPSG:999999' is not"),
+        ("scan_0.xyz,1,2,3\n", ["--no-adjust"], "--control needs the adjustment"),
+        (None, ["--crs", "EPSG:25832"], "--crs names the coordinate system of --control"),
+    ],
+)
+def test_a_bad_control_option_is_one_line_and_exit_2_before_any_work(
+    tmp_path, control, extra, needle
+):
+    files = _scans(tmp_path)
+    args = [*files, "--out", str(tmp_path / "out"), *extra]
+    if control is not None:
+        (tmp_path / "control.csv").write_text(control)
+        args += ["--control", str(tmp_path / "control.csv")]
+    res = runner.invoke(chain_app, args)
+    assert res.exit_code == EXIT_INPUT, res.output
+    lines = res.output.strip().splitlines()
+    assert len(lines) == 1 and needle in lines[0], res.output
+    assert "Traceback" not in res.output
+    assert not (tmp_path / "out").exists()
+
+
+def test_field_mode_reads_the_control_file_before_its_scans_land(tmp_path):
+    (tmp_path / "land").mkdir()
+    (tmp_path / "control.csv").write_text("scan_4.laz,1,2,3\nscan_5.laz,1,2,3,0,1\n")
+    args = [str(tmp_path / "land"), "--out", str(tmp_path / "out"), "--exit-when-idle", "0.1"]
+    res = runner.invoke(watch_app, [*args, "--control", str(tmp_path / "control.csv")])
+    assert res.exit_code == EXIT_INPUT and "line 2: standard deviations" in res.output
+    (tmp_path / "control.csv").write_text("scan_4.laz,1,2,3\n")  # names a scan yet to come
+    res = runner.invoke(watch_app, [*args, "--control", str(tmp_path / "control.csv")])
+    assert res.exit_code == 1, res.output  # no scan landed: nothing is ok, no input error
+    assert [s.name for s in read_stations(tmp_path / "control.csv")] == ["scan_4.laz"]
+
+
+def _cli(tool: str, *args: str) -> subprocess.CompletedProcess:
+    code = f"from ndt_cli.cli import {tool}; {tool}()"
+    return subprocess.run(
+        [sys.executable, "-c", code, *args], env=ENV, capture_output=True, text=True, check=False
+    )
+
+
+@pytest.mark.slow
+def test_a_street_with_gnss_on_three_scanners_and_one_blunder_ends_in_their_crs(tmp_path):
+    """8 scans of a sloped, cambered street from tilted scanners; GNSS positions of 3 scanners
+    (1 cm / 1.5 cm noise) and a 4th 60 cm off: the poses and the exported cloud are in the
+    stations' coordinates (the truth's, moved to UTM-like numbers and turned 30 degrees), the
+    blunder is named and not used, and the LAZ says EPSG:25832."""
+    world = sim.StreetWorld(seed=51, grade=0.05, camber=0.025, tilt_deg=0.8)
+    _, scans, truth = sim.scan_street(world)
+    G = np.eye(4)
+    yaw = np.radians(30.0)
+    G[:3, :3] = [[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]]
+    G[:3, 3] = [500_000.0, 5_400_000.0, 100.0]
+    T_crs_scan = [G @ T for T in truth]
+    files = []
+    for k, pts in enumerate(scans):
+        files.append(tmp_path / f"scan_{k}.laz")
+        io.write(files[-1], pts)
+    rng = np.random.default_rng(0)
+    rows = ["scan,x,y,z,sigma_xy,sigma_z"]
+    for k in (0, 3, 7):
+        xyz = T_crs_scan[k][:3, 3] + rng.normal(0.0, [0.01, 0.01, 0.015])
+        rows.append(f"scan_{k}.laz,{xyz[0]:.4f},{xyz[1]:.4f},{xyz[2]:.4f},0.02,0.03")
+    blunder = T_crs_scan[5][:3, 3] + [0.6, 0.0, 0.0]
+    rows.append(f"scan_5.laz,{blunder[0]:.4f},{blunder[1]:.4f},{blunder[2]:.4f},0.02,0.03")
+    (tmp_path / "control.csv").write_text("\n".join(rows) + "\n")
+    out = tmp_path / "out"
+    args = ["--control", str(tmp_path / "control.csv"), "--crs", f"EPSG:{EPSG}", "-q"]
+    res = _cli("chain_app", *map(str, files), "--out", str(out), "--jobs", "2", *args)
+    assert res.returncode == 0, res.stderr
+
+    poses = read_pose_list(out / "poses.txt")
+    for k, T in enumerate(T_crs_scan):
+        dt, dr = transform_errors(poses[f"scan_{k}.laz"], T)
+        assert dt < 0.03 and dr < 0.02, (k, dt, dr)
+    world_info = json.loads((out / "summary.json").read_text())["world"]
+    assert world_info["frame"] == "control" and "25832" in world_info["crs"]
+    used = {row["scan"]: row["used"] for row in world_info["controls"]}
+    assert used == {"scan_0.laz": True, "scan_3.laz": True, "scan_7.laz": True, "scan_5.laz": False}
+    assert "EPSG:25832" in (out / "poses.txt").read_text().splitlines()[1]
+
+    laz = tmp_path / "street.laz"
+    res = _cli("export_app", str(out), "--out", str(laz), "-q")
+    assert res.returncode == 0, res.stderr
+    cloud = laspy.read(laz)
+    assert cloud.header.parse_crs().to_epsg() == EPSG
+    xyz = np.column_stack([cloud.x, cloud.y, cloud.z])
+    for k in (1, 6):  # scans without a station, far from the anchor
+        mine = xyz[np.asarray(cloud.scan_index) == k]
+        homog = np.column_stack([scans[k], np.ones(len(scans[k]))])
+        true_points = (homog @ T_crs_scan[k].T)[:, :3]
+        assert len(mine) == len(true_points)  # in the order of the scan's file
+        d = np.linalg.norm(mine - true_points, axis=1)
+        assert np.percentile(d, 99) < 0.04, (k, np.percentile(d, 99))
