@@ -4,6 +4,7 @@ truth; equal results are compared with each other, never with numbers from the c
 
 from __future__ import annotations
 
+import csv
 import json
 from pathlib import Path
 
@@ -121,11 +122,38 @@ def test_a_shuffled_street_gives_the_same_result_as_the_street_in_order(street8,
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason="known defect: two simulated streets register ok onto each other (a false ok "
-    "link the gate lets through), and one such link joins the sites",
-)
+def test_coarse_positions_of_a_shuffled_street_choose_links_and_do_no_harm(street8, tmp_path):
+    """A scanner's own GNSS (metres) on every standpoint, the street shuffled: the candidates
+    by position are registered (no more registrations than without them), every scan is ok
+    and right relative to the others, and the world is the positions' frame."""
+    files, poses = street8
+    order = np.random.default_rng(8).permutation(len(files))
+    mixed = tmp_path / "mixed"
+    mixed.mkdir()
+    rng = np.random.default_rng(1)
+    rows = []
+    for k, scan in enumerate(order):
+        (mixed / f"scan_{k}.laz").write_bytes(files[scan].read_bytes())
+        x, y, z = poses[scan][:3, 3] + rng.normal(0.0, [1.5, 1.5, 2.0])
+        rows.append(f"scan_{k}.laz,{x:.3f},{y:.3f},{z:.3f},2.0,3.0")
+    (tmp_path / "gnss.csv").write_text("\n".join(rows) + "\n")
+    scans = sorted(mixed.glob("*.laz"))
+    plain, coarse = tmp_path / "plain", tmp_path / "coarse"
+    assert runner.invoke(chain_app, [*map(str, scans), "-o", str(plain), "-q"]).exit_code == 0
+    args = [*map(str, scans), "-o", str(coarse), "-q", "--control", str(tmp_path / "gnss.csv")]
+    assert runner.invoke(chain_app, args).exit_code == 0
+    assert len(_link_files(coarse)) <= len(_link_files(plain))
+    got = read_pose_list(coarse / "poses.txt")
+    first = int(np.flatnonzero(order == 0)[0])
+    inv_first = np.linalg.inv(got[f"scan_{first}.laz"])
+    for k, scan in enumerate(order):
+        truth = np.linalg.inv(poses[0]) @ poses[scan]
+        assert _right(inv_first @ got[f"scan_{k}.laz"], truth), k
+    world = json.loads((coarse / "summary.json").read_text())["world"]
+    assert world["frame"] == "control" and all(row["used"] for row in world["controls"])
+
+
+@pytest.mark.slow
 def test_two_campaigns_in_one_call_keep_apart(tmp_path):
     both = sim.two_sites(seed=2, n_scans=(4, 3))
     files = _write(tmp_path / "scans", both)
@@ -140,7 +168,10 @@ def test_two_campaigns_in_one_call_keep_apart(tmp_path):
         else:  # never ok in the anchor's frame
             assert f"{name}.laz" not in poses
     summary = json.loads((out / "summary.json").read_text())
-    assert sorted(summary["network"]["scans_not_ok"]) == ["b_00.laz", "b_01.laz", "b_02.laz"]
+    assert summary["network"]["clusters"] == {"0": 4, "1": 3}  # each site a cluster of its own
+    rows = {r["file"]: r for r in csv.DictReader((out / "poses.csv").open())}
+    for name, site in zip(both.names, both.site, strict=True):
+        assert rows[f"{name}.laz"]["cluster"] == str(site), name
 
 
 @pytest.mark.slow

@@ -144,3 +144,18 @@ def test_one_station_moves_the_levelled_frame_two_that_disagree_are_both_given_u
     two = datum(cluster, (a, b), solver, kept)
     assert two.frame == "levelled" and not any(f.used for f in two.controls)
     assert all("cannot be told" in f.reason for f in two.controls)
+
+
+def test_scans_near_by_known_positions_are_candidates_within_radius_and_sigmas():
+    from ndt_cli.pipeline.discovery import near_by_position
+
+    positions = {
+        0: (np.array([0.0, 0.0]), 0.02),
+        1: (np.array([30.0, 0.0]), 0.02),  # 30 m: within 25 m + 3 sigmas? no (0.08 m)
+        2: (np.array([20.0, 5.0]), 0.02),  # 20.6 m: yes
+        3: (np.array([31.0, 0.0]), 3.0),  # 31 m, but a coarse GNSS fix of 3 m: yes
+        4: (np.array([5.0, 0.0]), 0.02),  # nearest, and not a candidate
+    }
+    assert near_by_position(0, positions, [1, 2, 3], 25.0, 5) == [2, 3]
+    assert near_by_position(0, positions, [1, 2, 3, 4], 25.0, 2) == [4, 2]
+    assert near_by_position(5, positions, [0, 1], 25.0, 2) == []  # no position of its own

@@ -45,6 +45,8 @@ def _scans(tmp_path: Path, n: int = 2) -> list[str]:
         ("scan_0.xyz,1,2,3\n", ["--crs", "EPSG:999999"], "--crs 'EPSG:999999' is not"),
         ("scan_0.xyz,1,2,3\n", ["--no-adjust"], "--control needs the adjustment"),
         (None, ["--crs", "EPSG:25832"], "--crs names the coordinate system of --control"),
+        ("scan_0.xyz,1,2,3\n", ["--crs", "EPSG:4326"], "is geographic (degrees)"),
+        ("scan_0.xyz,1,2,3\n", ["--crs", "EPSG:2263"], "has axes in us survey foot"),
     ],
 )
 def test_a_bad_control_option_is_one_line_and_exit_2_before_any_work(
@@ -93,8 +95,14 @@ def test_a_street_with_gnss_on_three_scanners_and_one_blunder_ends_in_their_crs(
     G = np.eye(4)
     yaw = np.radians(30.0)
     G[:3, :3] = [[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]]
-    G[:3, 3] = [500_000.0, 5_400_000.0, 100.0]
+    G[:3, 3] = [500_000.0, 5_400_000.0, 100.0]  # on zone 32's central meridian
     T_crs_scan = [G @ T for T in truth]
+    # UTM's grid shrinks ground distances by its scale on the central meridian, 0.9996, and
+    # by R / (R + h) at 100 m: the stations' coordinates are on that grid (6 cm over the street)
+    scale = 0.9996 * 6_371_000.0 / (6_371_000.0 + 100.0)
+    centre = np.mean([T[:3, 3] for T in T_crs_scan], axis=0)
+    for T in T_crs_scan:
+        T[:2, 3] = centre[:2] + scale * (T[:2, 3] - centre[:2])
     files = []
     for k, pts in enumerate(scans):
         files.append(tmp_path / f"scan_{k}.laz")
@@ -114,10 +122,11 @@ def test_a_street_with_gnss_on_three_scanners_and_one_blunder_ends_in_their_crs(
 
     poses = read_pose_list(out / "poses.txt")
     for k, T in enumerate(T_crs_scan):
-        dt, dr = transform_errors(poses[f"scan_{k}.laz"], T)
-        assert dt < 0.03 and dr < 0.02, (k, dt, dr)
+        rot, trans = transform_errors(poses[f"scan_{k}.laz"], T)
+        assert trans < 0.03 and rot < 0.05, (k, rot, trans)
     world_info = json.loads((out / "summary.json").read_text())["world"]
     assert world_info["frame"] == "control" and "25832" in world_info["crs"]
+    assert abs(world_info["grid_scale"] - scale) < 1e-6
     used = {row["scan"]: row["used"] for row in world_info["controls"]}
     assert used == {"scan_0.laz": True, "scan_3.laz": True, "scan_7.laz": True, "scan_5.laz": False}
     assert "EPSG:25832" in (out / "poses.txt").read_text().splitlines()[1]
@@ -131,7 +140,23 @@ def test_a_street_with_gnss_on_three_scanners_and_one_blunder_ends_in_their_crs(
     for k in (1, 6):  # scans without a station, far from the anchor
         mine = xyz[np.asarray(cloud.scan_index) == k]
         homog = np.column_stack([scans[k], np.ones(len(scans[k]))])
-        true_points = (homog @ T_crs_scan[k].T)[:, :3]
+        true_points = (homog @ T_crs_scan[k].T)[:, :3]  # on the grid: scaled about the scanner
+        true_points[:, :2] = T_crs_scan[k][:2, 3] + scale * (
+            true_points[:, :2] - T_crs_scan[k][:2, 3]
+        )
         assert len(mine) == len(true_points)  # in the order of the scan's file
         d = np.linalg.norm(mine - true_points, axis=1)
         assert np.percentile(d, 99) < 0.04, (k, np.percentile(d, 99))
+
+
+@pytest.mark.parametrize("easting", [500_000.0, 650_000.0, 780_000.0])
+def test_the_grid_scale_is_utms_point_scale_times_the_height_reduction(easting):
+    """Independent reference: UTM's point scale k0 (1 + x^2 / 2R^2), x the distance from the
+    central meridian (good to 1e-6 within a zone), and R / (R + h)."""
+    from ndt_cli.io.crs import crs_wkt, grid_scale
+
+    x, h, R = easting - 500_000.0, 350.0, 6_381_000.0
+    expected = 0.9996 * (1 + x**2 / (2 * R**2)) * 6_371_000.0 / (6_371_000.0 + h)
+    got = grid_scale(crs_wkt("EPSG:25832"), np.array([easting, 5_400_000.0, h]))
+    assert abs(got - expected) < 1e-6
+    assert grid_scale(crs_wkt("EPSG:25832+5783"), np.array([easting, 5_400_000.0, h])) == got

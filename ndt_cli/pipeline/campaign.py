@@ -6,7 +6,8 @@ the network, and :meth:`Campaign.add_scans` updates them in named steps:
 2. **Summarise**: each new scan is read and prepared once (its sketch and preview are kept in
    the link store, so a campaign that resumes does not read it again).
 3. **Discover** (:mod:`ndt_cli.pipeline.discovery`): where each new scan is, from coarse
-   global matches with the placed scans; it is registered fully to the nearest of them.
+   global matches with the placed scans; it is registered fully to the nearest of them, and
+   to the scans near it by known positions (control stations, however coarse), when given.
 4. **Consolidate**: place every scan again by all its links (:func:`replace_all`), plan the
    network from where the scans are (:func:`~ndt_cli.pipeline.network.plan_near`) and
    register what is missing, until the plan holds.
@@ -23,11 +24,12 @@ from __future__ import annotations
 
 import logging
 from collections import OrderedDict
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.linalg import inv
@@ -45,6 +47,7 @@ from ndt_cli.pipeline.discovery import (
     Prediction,
     agree,
     consensus,
+    near_by_position,
     nearest,
     predict,
 )
@@ -89,6 +92,7 @@ class NetworkOptions:
     stations: tuple[Station, ...] = ()  # of known coordinates (the world: theirs); a station
     # counts once its scan is in the campaign (field mode: the control file is read first)
     crs: str = ""  # the coordinate system of the stations, as WKT ("" when not given)
+    grid_scale: float = 1.0  # its grid distance over ground distance at the stations
 
     @property
     def classic(self) -> bool:
@@ -109,6 +113,7 @@ class ChainResult:
     reused: tuple[int, ...] = ()  # links taken from an earlier run (--resume)
     radius: float = float("nan")  # m, the radius links were planned within
     crs: str = ""  # the world's coordinate system as WKT, when control gave it
+    grid_scale: float = 1.0  # its grid distance over ground distance, applied at the scanners
 
     @property
     def poses(self) -> tuple[np.ndarray | None, ...]:
@@ -204,6 +209,7 @@ class Campaign:
             self.net.adjust,
             self.unreadable,
             matched(self.net.stations, names),
+            self.net.grid_scale,
         )
         _log_controls(solution)
         return ChainResult(
@@ -216,8 +222,14 @@ class Campaign:
             previews={i: s.preview for i, s in sorted(self.summaries.items())},
             reused=tuple(k for k, link in enumerate(links) if link.key in self.reused),
             radius=self.radius,
-            crs=self.net.crs if solution.datum and solution.datum.frame == "control" else "",
+            **self._world_system(solution),
         )
+
+    def _world_system(self, solution: NetworkSolution) -> dict[str, Any]:
+        """The coordinate system of the world and its scale, when control made the world."""
+        if solution.datum is None or solution.datum.frame != "control":
+            return {}
+        return {"crs": self.net.crs, "grid_scale": self.net.grid_scale}
 
     def report(self, index: int, result: ChainResult) -> ScanReport:
         """What the network made of scan ``index`` in ``result``."""
@@ -274,12 +286,14 @@ class Campaign:
         best coarse match among them and those that agree with it are registered); without an
         ok link, by every placed scan: the best coarse prediction, registered to the
         :data:`PROBES` placed scans nearest to it, then the next distinct one, up to
-        :data:`ATTEMPTS`. Nothing fits: a group of its own, for now."""
+        :data:`ATTEMPTS`. Scans near it by known positions (control stations) are registered
+        in the first step too. Nothing fits: a group of its own, for now."""
         where = self.where
         hinted = consensus(predict(scan, [scan + d for d in HINTS], where, self._match))
-        if hinted:
-            walk = [scan - 1] if scan - 1 in where else []  # the scan before it, in any case
-            targets = dict.fromkeys([*walk, *(g.via for g in hinted)])
+        known = self._near(scan, where)
+        if hinted or known:
+            walk = [scan - 1] if hinted and scan - 1 in where else []  # the scan before it
+            targets = dict.fromkeys([*walk, *(g.via for g in hinted), *known])
             self._register([self._planned(pair_of(scan, t)) for t in targets])
             if self._settle(scan):
                 return
@@ -321,7 +335,8 @@ class Campaign:
     def _bridge(self, new: list[int]) -> None:
         """Join the groups of placed scans where they overlap: for each group but the
         largest, its :data:`BRIDGES` best coarse matches (pairs with a new scan, not tried
-        yet) with scans of other groups are registered; an ok one joins the two groups."""
+        yet) with scans of other groups are registered, pairs near by known positions first;
+        an ok one joins the two groups."""
         fresh = set(new)
         while True:
             groups = self._groups()
@@ -336,11 +351,22 @@ class Campaign:
                     and (a in fresh or b in fresh)
                     and pair_of(a, b) not in self.links
                 ]
-                cross.sort(key=lambda p: (-self._match(*p).score, p))
+                near = {pair_of(a, b) for a in group for b in self._near(a, self.where)}
+                cross.sort(key=lambda p: (p not in near, -self._match(*p).score, p))
                 pairs += [p for p in cross[:BRIDGES] if p not in pairs]
             self._register([self._planned(p) for p in pairs], both_ways=True)
             if not any(self._join(p) for p in pairs):
                 return
+
+    def _positions(self) -> dict[int, tuple[np.ndarray, float]]:
+        """(x, y) m and horizontal sigma of the scans with a control station."""
+        found = matched(self.net.stations, scan_names(self.paths))
+        return {c.scan: (c.xyz[:2], c.sigma_xy) for c in found}
+
+    def _near(self, scan: int, candidates: Iterable[int]) -> list[int]:
+        """Candidates near ``scan`` by known positions (:func:`near_by_position`)."""
+        radius = self._placing_radius()
+        return near_by_position(scan, self._positions(), candidates, radius, PROBES)
 
     def _groups(self) -> list[list[int]]:
         """The placed scans by group, the largest first (ties: the lowest scan)."""

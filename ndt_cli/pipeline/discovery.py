@@ -11,7 +11,9 @@ that agree with it (:func:`consensus`), or to the placed scans nearest to it
 
 The campaign's order is a hint: the scans next to the new one in that order (:data:`HINTS`)
 are matched first; only when registering those gives no ok link is every placed scan
-matched.
+matched. Known positions (control stations, down to a scanner's own GNSS of metres) name
+candidates too (:func:`near_by_position`): whatever the coarse match says, scans near each
+other by position are registered.
 """
 
 from __future__ import annotations
@@ -92,3 +94,28 @@ def nearest(
     d = [float(np.hypot(*(where[s].T_group_scan[:2, 3] - xy))) for s in mine]
     order = sorted(range(len(mine)), key=lambda n: (d[n], mine[n]))
     return [mine[n] for n in order if d[n] <= radius][:k]
+
+
+def near_by_position(
+    scan: int,
+    positions: Mapping[int, tuple[np.ndarray, float]],
+    candidates: Iterable[int],
+    radius: float,
+    k: int,
+) -> list[int]:
+    """The ``k`` candidates nearest to ``scan`` by their known positions (control stations,
+    however coarse: a scanner's own GNSS of metres), each at most ``radius`` m plus three
+    standard deviations of the distance away. ``positions``: (x, y) m in the control's frame
+    and the horizontal standard deviation (m), per scan that has one; none for ``scan``:
+    none."""
+    if scan not in positions:
+        return []
+    xy, sigma = positions[scan]
+    found = []
+    for other in candidates:
+        if other == scan or other not in positions:
+            continue
+        d = float(np.hypot(*(positions[other][0] - xy)))
+        if d <= radius + 3.0 * float(np.hypot(sigma, positions[other][1])):
+            found.append((d, other))
+    return [other for _, other in sorted(found)[:k]]

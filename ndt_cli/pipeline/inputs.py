@@ -9,8 +9,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from ndt_cli.errors import ConfigError, InputError
-from ndt_cli.io.crs import crs_wkt
+from ndt_cli.io.crs import check_metres, crs_wkt, grid_scale
 from ndt_cli.pipeline.campaign import NetworkOptions
 from ndt_cli.pipeline.control import matched, read_stations
 from ndt_cli.pipeline.network import read_pairs
@@ -89,7 +91,11 @@ def network_options(
     if stations and not adjust:
         raise ConfigError("--control needs the adjustment (not --no-adjust)")
     wkt = crs_wkt(crs) if crs is not None else ""
-    return NetworkOptions(neighbours, adjust, radius, user, stations, wkt)
+    scale = 1.0
+    if wkt:
+        check_metres(wkt, crs)
+        scale = grid_scale(wkt, np.mean([s.xyz for s in stations], axis=0))
+    return NetworkOptions(neighbours, adjust, radius, user, stations, wkt, scale)
 
 
 def chain_inputs(

@@ -151,13 +151,14 @@ def solve(
     adjust: bool,
     unreadable: dict[int, str],
     controls: Sequence[Control] = (),
+    grid_scale: float = 1.0,
 ) -> NetworkSolution:
     """The pose and status of every scan, and the state of every link; with the adjustment,
     the anchor's cluster in the world of :mod:`ndt_cli.pipeline.datum` (levelled, or the
-    coordinate system of the ``controls``)."""
+    coordinate system of the ``controls``, whose grid distance over ground is ``grid_scale``)."""
     plain = tuple(chained(n_scans, links, anchor, {LinkKind.ADJACENT}))
     if adjust:
-        return _adjusted(n_scans, anchor, links, unreadable, plain, controls)
+        return _adjusted(n_scans, anchor, links, unreadable, plain, controls, grid_scale)
     poses = chained(n_scans, links, anchor, set(LinkKind))
     scans = tuple(
         ScanPose(NodeStatus.OK, T, cluster=0)
@@ -189,6 +190,7 @@ def _adjusted(
     unreadable: dict[int, str],
     plain: tuple[np.ndarray | None, ...],
     controls: Sequence[Control] = (),
+    grid_scale: float = 1.0,
 ) -> NetworkSolution:
     """Verify and adjust the network of usable links, set it in the world; map nodes and edges
     back."""
@@ -206,7 +208,7 @@ def _adjusted(
     ]
     v = verify(n_scans, anchor, edges)
     scans = [_scan_pose(node, red, v.roots, unreadable, links) for node in v.nodes]
-    world = _datum(v, edges, links, red, controls)
+    world = _datum(v, edges, links, red, controls, grid_scale)
     if world is not None:
         scans = _in_world(scans, world, v, red, anchor)
     fits = [LinkFit(EdgeState.UNUSED, reason=_left_out(k)) for k in links]
@@ -239,6 +241,7 @@ def _datum(
     links: Sequence[Link],
     red: Sequence[np.ndarray | None],
     controls: Sequence[Control],
+    grid_scale: float,
 ) -> Datum | None:
     """The world frame of the anchor's cluster (:mod:`ndt_cli.pipeline.datum`); None when the
     anchor has no link (it is the world, as it stands)."""
@@ -261,7 +264,7 @@ def _datum(
         if e.state in (EdgeState.CONFIRMED, EdgeState.USED) and {e.target, e.source} <= members
     ]
     solver = Solver(len(red), anchor, edges, None, "huber", float(np.sqrt(v.threshold)), 100)
-    return datum(cluster, controls, solver, kept)
+    return datum(cluster, controls, solver, kept, grid_scale)
 
 
 def _in_world(

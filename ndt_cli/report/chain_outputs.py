@@ -96,6 +96,7 @@ def world_summary(result: ChainResult) -> dict[str, Any]:
         "frame": datum.frame,
         "anchor": result.names[result.anchor],
         "crs": result.crs or None,
+        "grid_scale": result.grid_scale,
         "vertical_sigma_deg": datum.vertical_sigma_deg,
         "controls": rows,
     }
