@@ -239,3 +239,59 @@ def test_a_damaged_result_is_exported_right_or_refused_in_one_line(
     finally:
         for f, raw in kept.items():
             f.write_bytes(raw)
+
+
+def _with_stray_point(src: Path, dst: Path, where: np.ndarray | None) -> None:
+    """``src`` (LAS/LAZ) with one more point: at ``where`` (m, scanner frame), or, with None, a
+    record at the int32 limit of the file's integer coordinates (a "no return" some scanners
+    write)."""
+    import laspy
+
+    las = laspy.read(src)
+    extra = laspy.ScaleAwarePointRecord.zeros(1, header=las.header)
+    if where is None:
+        extra.X = extra.Y = extra.Z = np.array([2**31 - 1], dtype=np.int32)
+    else:
+        extra.x, extra.y, extra.z = where
+    las.points = laspy.ScaleAwarePointRecord(
+        np.concatenate([las.points.array, extra.array]),
+        las.header.point_format,
+        las.header.scales,
+        las.header.offsets,
+    )
+    las.header.scales = las.header.scales  # bounds are updated on write
+    las.write(dst)
+
+
+@pytest.mark.parametrize(
+    "where",
+    [(250_000.0, 3_000.0, 10.0), (20_000.0, -500.0, 2.0), (0.0, 1e6, -1e6), None, 1e12],
+    ids=["250km", "20km", "1000km", "int32-max-record", "1e12m-xyz"],
+)
+def test_one_stray_point_far_away_neither_hangs_nor_fails_a_good_pair(pair, tmp_path, where):
+    """D15, D22: one point far from the scanner (a glitch, a "no return" record) is left out:
+    the pair registers as without it, in bounded time, without a traceback."""
+    import subprocess
+    import sys
+
+    files, truth = pair
+    if where == 1e12:  # beyond what LAS holds: a text file
+        stray = tmp_path / "b_stray.xyz"
+        io.write(stray, np.vstack([io.read(files[1]).points, [1e12, 0.0, 0.0]]))
+    else:
+        stray = tmp_path / "b_stray.laz"
+        _with_stray_point(files[1], stray, None if where is None else np.array(where))
+    assert np.abs(io.read(stray).points).max() > 1e4  # the stray point is in the file
+    out = tmp_path / "out"
+    code = "from ndt_cli.cli import register_app; register_app()"
+    res = subprocess.run(
+        [sys.executable, "-c", code, str(files[0]), str(stray), "--out", str(out), "-q"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    assert res.returncode == 0, res.stderr
+    assert "Traceback" not in res.stderr
+    rot, trans = transform_errors(read_matrix(out / "T_target_source.txt"), truth)
+    assert rot < 0.1 and trans < 0.05, (rot, trans)
