@@ -172,6 +172,13 @@ def test_two_campaigns_in_one_call_keep_apart(tmp_path):
     rows = {r["file"]: r for r in csv.DictReader((out / "poses.csv").open())}
     for name, site in zip(both.names, both.site, strict=True):
         assert rows[f"{name}.laz"]["cluster"] == str(site), name
+    # the other site's poses: in the frame of its own first scan, right relative to each other
+    other = [k for k, site in enumerate(both.site) if site == 1]
+    first = np.linalg.inv(both.poses[other[0]])
+    for k in other:
+        row = rows[f"{both.names[k]}.laz"]
+        T = np.array([float(row[f"m{i}{j}"]) for i in range(4) for j in range(4)]).reshape(4, 4)
+        assert _right(T, first @ both.poses[k]), both.names[k]
 
 
 @pytest.mark.slow
