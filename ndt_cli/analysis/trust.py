@@ -20,7 +20,7 @@ import numpy as np
 
 from ndt_cli.core.transforms import transform_errors
 from ndt_cli.ndt.result import RegistrationResult, Status
-from ndt_cli.pipeline.chain import ChainResult
+from ndt_cli.pipeline.result import ChainResult
 from ndt_cli.pipeline.verify import EdgeState, NodeStatus
 
 CORRECT = (0.1, 0.05)  # degrees, metres: what a registration must reach to count as right

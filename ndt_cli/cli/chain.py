@@ -36,8 +36,8 @@ from ndt_cli.pipeline.workers import ExecutorKind
 
 if TYPE_CHECKING:
     from ndt_cli.config import Config
-    from ndt_cli.pipeline.campaign import ChainResult
     from ndt_cli.pipeline.inputs import ChainInputs
+    from ndt_cli.pipeline.result import ChainResult
 
 chain_app = new_app()
 

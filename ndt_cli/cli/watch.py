@@ -33,7 +33,8 @@ from ndt_cli.errors import EXIT_REGISTRATION
 
 if TYPE_CHECKING:
     from ndt_cli.config import Config
-    from ndt_cli.pipeline.campaign import Campaign, ChainResult, NetworkOptions, ScanReport
+    from ndt_cli.pipeline.campaign import Campaign, NetworkOptions
+    from ndt_cli.pipeline.result import ChainResult, ScanReport
     from ndt_cli.pipeline.watch import Landed
 
 watch_app = new_app()

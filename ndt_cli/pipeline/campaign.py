@@ -62,11 +62,11 @@ from ndt_cli.pipeline.network import (
     pair_of,
     plan_near,
 )
+from ndt_cli.pipeline.result import ChainResult, ScanReport, scan_report
 from ndt_cli.pipeline.scans import file_hash, scan_names
 from ndt_cli.pipeline.solution import NetworkSolution, solve, usable
 from ndt_cli.pipeline.tasks import LinkJob, ScanSummary, register_link, register_paths
 from ndt_cli.pipeline.tasks import summarise_scan as _summarise
-from ndt_cli.pipeline.verify import EdgeState, NodeStatus
 
 log = logging.getLogger(__name__)
 progress = logging.getLogger("ndt_cli.progress")
@@ -97,46 +97,6 @@ class NetworkOptions:
     @property
     def classic(self) -> bool:
         return self.neighbours == 1
-
-
-@dataclass(frozen=True)
-class ChainResult:
-    """The links of a campaign and what the network made of them."""
-
-    scans: tuple[Path, ...]
-    names: tuple[str, ...]  # unique scan names, as the outputs show them
-    links: tuple[Link, ...]
-    solution: NetworkSolution
-    anchor: int
-    unreadable: dict[int, str]
-    previews: dict[int, np.ndarray]  # thinned slice points (x, y, z) per scan, scan frame
-    reused: tuple[int, ...] = ()  # links taken from an earlier run (--resume)
-    radius: float = float("nan")  # m, the radius links were planned within
-    crs: str = ""  # the world's coordinate system as WKT, when control gave it
-    grid_scale: float = 1.0  # its grid distance over ground distance, applied at the scanners
-
-    @property
-    def poses(self) -> tuple[np.ndarray | None, ...]:
-        """``T_world_scan`` of every scan (None when unposed; suspect scans have one too)."""
-        return self.solution.poses
-
-    @property
-    def ok(self) -> bool:
-        """Every scan has a trustworthy pose in the anchor's frame (one cluster)."""
-        return all(s.anchored for s in self.solution.scans)
-
-
-@dataclass(frozen=True)
-class ScanReport:
-    """What the campaign made of one scan: its status, where it is (world, m; None when
-    unposed), the scans it is linked to by kept links, and why it is not ok."""
-
-    index: int
-    name: str
-    status: NodeStatus
-    position: np.ndarray | None
-    linked: tuple[str, ...]
-    reason: str
 
 
 class Campaign:
@@ -233,20 +193,7 @@ class Campaign:
 
     def report(self, index: int, result: ChainResult) -> ScanReport:
         """What the network made of scan ``index`` in ``result``."""
-        scan = result.solution.scans[index]
-        kept = (EdgeState.CONFIRMED, EdgeState.USED)
-        linked = sorted(
-            {
-                result.names[k.source if k.target == index else k.target]
-                for k, fit in zip(result.links, result.solution.links, strict=True)
-                if index in (k.target, k.source) and fit.state in kept
-            }
-        )
-        T = scan.T_world_scan
-        where = None if T is None else T[:3, 3].copy()
-        return ScanReport(
-            index, result.names[index], scan.status, where, tuple(linked), scan.reason
-        )
+        return scan_report(index, result)
 
     def close(self) -> None:
         self.executor.close()

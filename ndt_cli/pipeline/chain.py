@@ -7,11 +7,12 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from ndt_cli.config.schema import Config
-from ndt_cli.pipeline.campaign import Campaign, ChainResult, NetworkOptions
+from ndt_cli.pipeline.campaign import Campaign, NetworkOptions
 from ndt_cli.pipeline.executors import Executor
 from ndt_cli.pipeline.links import Link
 from ndt_cli.pipeline.local_pool import WorkerPool
 from ndt_cli.pipeline.network import classic_chain
+from ndt_cli.pipeline.result import ChainResult
 from ndt_cli.pipeline.workers import default_jobs
 
 __all__ = ["ChainResult", "NetworkOptions", "plan_links", "run_chain"]

@@ -17,7 +17,7 @@ from ndt_cli.io.names import link_file_names, pose_file_names
 from ndt_cli.io.outdir import publish
 from ndt_cli.io.serialize import csv_text, to_json
 from ndt_cli.ndt.result import Status
-from ndt_cli.pipeline.campaign import ChainResult
+from ndt_cli.pipeline.result import ChainResult
 from ndt_cli.pipeline.scans import file_hash
 from ndt_cli.pipeline.solution import ScanPose
 from ndt_cli.pipeline.verify import NodeStatus

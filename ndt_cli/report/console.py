@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from ndt_cli.ndt.result import RegistrationResult
-from ndt_cli.pipeline.campaign import ChainResult
+from ndt_cli.pipeline.result import ChainResult
 from ndt_cli.report.tables import pair_row
 
 

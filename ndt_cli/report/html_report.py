@@ -20,8 +20,8 @@ from ndt_cli.report.html import Figure, HtmlReport, LinkRow, ScanRow, Verdict, r
 
 if TYPE_CHECKING:  # a pair's report does not load the network's modules
     from ndt_cli.ndt.result import RegistrationResult
-    from ndt_cli.pipeline.campaign import ChainResult
     from ndt_cli.pipeline.links import Link
+    from ndt_cli.pipeline.result import ChainResult
     from ndt_cli.pipeline.solution import LinkFit, ScanPose
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import re
 from dataclasses import replace
 
-from ndt_cli.pipeline.campaign import ChainResult
+from ndt_cli.pipeline.result import ChainResult
 from ndt_cli.pipeline.solution import usable
 
 _VIA = re.compile(r"link (\d+) \(T_(\d+)_(\d+)\)")

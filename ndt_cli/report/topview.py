@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ndt_cli.pipeline.campaign import ChainResult
 from ndt_cli.pipeline.links import Link
+from ndt_cli.pipeline.result import ChainResult
 from ndt_cli.pipeline.solution import LinkFit
 from ndt_cli.pipeline.verify import EdgeState, NodeStatus
 from ndt_cli.report.planview import Edge, EdgeStyle, Scan, Scene, render

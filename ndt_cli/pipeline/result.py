@@ -1,0 +1,70 @@
+"""What a campaign ends with: its links and what the network made of them, as the outputs,
+the report and ``ndt-watch`` read it (the campaign engine, :mod:`ndt_cli.pipeline.campaign`,
+builds it)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ndt_cli.pipeline.links import Link
+from ndt_cli.pipeline.solution import NetworkSolution
+from ndt_cli.pipeline.verify import EdgeState, NodeStatus
+
+
+@dataclass(frozen=True)
+class ChainResult:
+    """The links of a campaign and what the network made of them."""
+
+    scans: tuple[Path, ...]
+    names: tuple[str, ...]  # unique scan names, as the outputs show them
+    links: tuple[Link, ...]
+    solution: NetworkSolution
+    anchor: int
+    unreadable: dict[int, str]
+    previews: dict[int, np.ndarray]  # thinned slice points (x, y, z) per scan, scan frame
+    reused: tuple[int, ...] = ()  # links taken from an earlier run (--resume)
+    radius: float = float("nan")  # m, the radius links were planned within
+    crs: str = ""  # the world's coordinate system as WKT, when control gave it
+    grid_scale: float = 1.0  # its grid distance over ground distance, applied at the scanners
+
+    @property
+    def poses(self) -> tuple[np.ndarray | None, ...]:
+        """``T_world_scan`` of every scan (None when unposed; suspect scans have one too)."""
+        return self.solution.poses
+
+    @property
+    def ok(self) -> bool:
+        """Every scan has a trustworthy pose in the anchor's frame (one cluster)."""
+        return all(s.anchored for s in self.solution.scans)
+
+
+@dataclass(frozen=True)
+class ScanReport:
+    """What the campaign made of one scan: its status, where it is (world, m; None when
+    unposed), the scans it is linked to by kept links, and why it is not ok."""
+
+    index: int
+    name: str
+    status: NodeStatus
+    position: np.ndarray | None
+    linked: tuple[str, ...]
+    reason: str
+
+
+def scan_report(index: int, result: ChainResult) -> ScanReport:
+    """What the network made of scan ``index`` in ``result``."""
+    scan = result.solution.scans[index]
+    kept = (EdgeState.CONFIRMED, EdgeState.USED)
+    linked = sorted(
+        {
+            result.names[k.source if k.target == index else k.target]
+            for k, fit in zip(result.links, result.solution.links, strict=True)
+            if index in (k.target, k.source) and fit.state in kept
+        }
+    )
+    T = scan.T_world_scan
+    where = None if T is None else T[:3, 3].copy()
+    return ScanReport(index, result.names[index], scan.status, where, tuple(linked), scan.reason)
