@@ -148,20 +148,21 @@ def _run(
     from ndt_cli.errors import InputError
     from ndt_cli.io.export import export
     from ndt_cli.io.points import check_readable
-    from ndt_cli.report import cloud
+    from ndt_cli.pipeline import result_folder
 
-    scans, anchor = cloud.result_scans(folder)
-    cfg = cloud.result_config(folder)
-    crs = cloud.result_crs(folder)
-    keep, left = cloud.select(scans, None if names is None else names.split(","), include_suspect)
+    scans, anchor = result_folder.result_scans(folder)
+    cfg = result_folder.result_config(folder)
+    crs = result_folder.result_crs(folder)
+    chosen_names = None if names is None else names.split(",")
+    keep, left = result_folder.select(scans, chosen_names, include_suspect)
     for line in left:
         log.warning("left out %s", line)
     if not keep:
         raise InputError("no scan of the result can be exported (see the lines above)", folder)
     for k in keep:
         check_readable(scans[k].file)
-    cloud.check_scan_files(scans, keep)
-    chosen = cloud.export_scans(keep, scans, anchor, cfg)
+    result_folder.check_scan_files(scans, keep)
+    chosen = result_folder.export_scans(keep, scans, anchor, cfg)
     with _Bar(not quiet) as progress:
         res = export(
             chosen,

@@ -69,8 +69,9 @@ class PreparedScan:
         return Sight.of_scan(self)
 
     @property
-    def label(self) -> str:
-        return str(self.path) if self.path is not None else "<array>"
+    def label(self) -> str | None:
+        """The scan's file as given (None: prepared from an array)."""
+        return None if self.path is None else str(self.path)
 
     def centroid(self) -> np.ndarray:
         """Median (x, y) of all slice points, reduced frame: a robust centre of the scene."""

@@ -94,7 +94,7 @@ class RegistrationResult:
     ground_z_target: float  # m, target frame
     ground_z_source: float  # m, source frame
     runtime_s: float
-    target: str | None = None
+    target: str | None = None  # the scans' files as given (None: registered from an array)
     source: str | None = None
     warnings: tuple[str, ...] = field(default=())
     icp_rms: float = float("nan")  # RMS of the inlier point-to-plane distances after ICP, m
@@ -137,6 +137,11 @@ class RegistrationResult:
     @property
     def ok(self) -> bool:
         return self.status is Status.OK
+
+    @property
+    def labels(self) -> tuple[str, str]:
+        """The target's and source's names as the outputs show them (an array: ``<array>``)."""
+        return _label(self.target), _label(self.source)
 
     @property
     def degenerate(self) -> str:
@@ -257,6 +262,10 @@ class RegistrationResult:
             T_ndt=_array(d.get("T_ndt")),
         )
         return cls(**kw)
+
+
+def _label(name: str | None) -> str:
+    return "<array>" if name is None else name
 
 
 def _list(a: np.ndarray | None) -> list | None:

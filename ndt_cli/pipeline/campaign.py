@@ -204,7 +204,7 @@ class Campaign:
         first = len(self.paths)
         for p in paths:
             self.paths.append(Path(p))
-            self.hashes.append(file_hash(Path(p)))
+            self.hashes.append(_identity(Path(p)))
         return list(range(first, len(self.paths)))
 
     def _summarise(self, new: list[int]) -> None:
@@ -566,6 +566,12 @@ class Campaign:
                 f"interrupted: {len(self.links)} finished link(s) kept in {self.store.folder}; "
                 f"{self.on_interrupt} to continue"
             ) from None
+
+
+def _identity(path: Path) -> str:
+    """What a scan is known by in link keys: the SHA-256 of its file; a file that cannot be
+    read (whose links fail and are never kept) by its path."""
+    return file_hash(path) or f"unreadable {path}"
 
 
 def _T(link: Link, other: int) -> np.ndarray:

@@ -29,8 +29,8 @@ def natural_sort(paths: Sequence[str | Path]) -> list[Path]:
     ]
 
 
-def file_hash(path: Path) -> str:
-    """SHA-256 of a scan's file bytes (and its scan number in an E57); 'missing' if unreadable."""
+def file_hash(path: Path) -> str | None:
+    """SHA-256 of a scan's file bytes (and its scan number in an E57); None if unreadable."""
     from ndt_cli.io.multiscan import split_spec
 
     file, index = split_spec(path)
@@ -40,7 +40,7 @@ def file_hash(path: Path) -> str:
             while chunk := fh.read(_HASH_CHUNK):
                 h.update(chunk)
     except OSError:
-        return "missing"
+        return None
     return h.hexdigest()
 
 

@@ -14,7 +14,8 @@ def print_summary(result: RegistrationResult, console: Any) -> None:
     from rich.table import Table
 
     tx, ty, tz = result.translation
-    head = Table(title=f"{result.source} -> {result.target}", show_header=False)
+    target, source = result.labels
+    head = Table(title=f"{source} -> {target}", show_header=False)
     head.add_row("status", result.status.value)
     head.add_row("translation (m)", f"{tx:.4f}  {ty:.4f}  {tz:.4f}")
     head.add_row("yaw (deg)", f"{result.yaw_deg:.4f}")

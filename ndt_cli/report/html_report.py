@@ -126,14 +126,15 @@ def register_report(result: RegistrationResult, config_yaml: str) -> str:
     T = result.T_target_source
     source_status = "ok" if result.ok else result.status.value
     reason = "; ".join(result.warnings)
+    target, source = result.labels
     scans = (
-        ScanRow(str(result.target), "anchor", 0.0, 0.0, 0.0, 0.0),
-        ScanRow(str(result.source), source_status, *T[:3, 3], result.yaw_deg, reason=reason),
+        ScanRow(target, "anchor", 0.0, 0.0, 0.0, 0.0),
+        ScanRow(source, source_status, *T[:3, 3], result.yaw_deg, reason=reason),
     )
     link = LinkRow(
         kind="pair",
-        target=str(result.target),
-        source=str(result.source),
+        target=target,
+        source=source,
         status=result.status.value,
         score_per_point=result.score_per_point,
         overlap=result.overlap,

@@ -19,14 +19,14 @@ from ndt_cli.report.html_report import register_report
 from ndt_cli.report.tables import REPORT_COLUMNS, report_row
 
 
-def _with_files(data: dict) -> dict:
+def _with_files(result: RegistrationResult) -> dict:
     """The result's dict plus the absolute paths of its scan files and their SHA-256 (for
-    ``ndt-export``)."""
-    for end in ("target", "source"):
-        label = data.get(end)
-        if label and label != "<array>":
-            data[f"{end}_file"] = str(Path(label).resolve())
-            data[f"{end}_sha256"] = file_hash(Path(label))
+    ``ndt-export``; None when a file cannot be read); nothing of a scan given as an array."""
+    data = result.to_dict()
+    for end, name in (("target", result.target), ("source", result.source)):
+        if name is not None:
+            data[f"{end}_file"] = str(Path(name).resolve())
+            data[f"{end}_sha256"] = file_hash(Path(name))
     return data
 
 
@@ -36,7 +36,7 @@ def register_files(result: RegistrationResult, cfg: Config) -> dict[str, str]:
     return {
         "T_target_source.txt": format_matrix(result.T_target_source),
         "report.csv": csv_text([report_row(result)], REPORT_COLUMNS),
-        "result.json": to_json(_with_files(result.to_dict())),
+        "result.json": to_json(_with_files(result)),
         "config_used.yaml": config,
         "report.html": register_report(result, config),
     }

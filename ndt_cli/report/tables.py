@@ -102,7 +102,8 @@ def metrics(result: RegistrationResult | None, columns: tuple[str, ...]) -> dict
 
 def report_row(result: RegistrationResult) -> dict[str, Any]:
     """The row of ``report.csv`` of a registration."""
-    return {"target": result.target, "source": result.source, **metrics(result, REPORT_COLUMNS)}
+    target, source = result.labels
+    return {"target": target, "source": source, **metrics(result, REPORT_COLUMNS)}
 
 
 def pair_row(link: Any, names: tuple[str, ...], fit: Any = None) -> dict[str, Any]:

@@ -1,4 +1,4 @@
-"""The registered point cloud of a result folder: which scans, from which files, in which pose.
+"""A result folder read back for the export: which scans, from which files, in which pose.
 
 An ``ndt-chain`` folder names its scans' files in ``summary.json`` and their status and
 ``T_world_scan`` in ``poses.csv``; an ``ndt-register`` folder names both files in
@@ -17,9 +17,10 @@ still be the one registered (the SHA-256 the result records). Anything else is a
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from enum import Enum
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -32,27 +33,49 @@ from ndt_cli.io.matrices import rigid_problem
 from ndt_cli.io.outdir import check_unchanged
 from ndt_cli.io.records import RawVlr
 from ndt_cli.io.serialize import read_json_object, read_table
+from ndt_cli.ndt.result import Status
 from ndt_cli.pipeline.scans import file_hash, scan_names
+from ndt_cli.pipeline.verify import NodeStatus
 
 log = logging.getLogger(__name__)
 
-CHAIN_STATUSES = ("ok", "suspect", "unposed")
-PAIR_STATUSES = ("ok", "degenerate", "suspect", "not_converged", "no_overlap")
+_E = TypeVar("_E", bound=Enum)
+PAIR_STATUSES = tuple(s for s in Status if s is not Status.FAILED)  # what result.json may say
 MATRIX = tuple(f"m{r}{c}" for r in range(4) for c in range(4))
 POSE_TOLERANCE = 1e-6  # largest deviation of R R^T from the identity in a written pose
 
 
+_OK = {NodeStatus.OK, Status.OK}
+_SUSPECT = {NodeStatus.SUSPECT, Status.SUSPECT}
+
+
 @dataclass(frozen=True)
 class ResultScan:
-    """A scan of a result: its name, file, status, T_world_scan (None when unposed), reason,
-    and the SHA-256 of its file when registered ('' when the result does not record it)."""
+    """A scan of a result: its name, file, status (a chain's :class:`NodeStatus`; a pair's
+    :class:`Status` of its registration), T_world_scan (None when unposed), reason, the
+    cluster it is posed in when not the anchor's (None in the anchor's), and the SHA-256 of
+    its file when registered (None when it could not be read then; ``hash_recorded``: whether
+    the result records it at all: older results do not)."""
 
     name: str
     file: Path
-    status: str
+    status: NodeStatus | Status
     T_world_scan: np.ndarray | None
     reason: str = ""
-    sha256: str = ""
+    other_cluster: str | None = None
+    sha256: str | None = None
+    hash_recorded: bool = False
+
+    @property
+    def shown(self) -> str:
+        """The status as the export names it ('other cluster' outside the anchor's)."""
+        return self.status.value if self.other_cluster is None else "other cluster"
+
+    def exportable(self, include_suspect: bool) -> bool:
+        """Posed in the anchor's frame, ok (or suspect, when ``include_suspect``)."""
+        allowed = _OK | _SUSPECT if include_suspect else _OK
+        posed = self.T_world_scan is not None and self.other_cluster is None
+        return posed and self.status in allowed
 
 
 def _file(path: str) -> Path:
@@ -61,9 +84,14 @@ def _file(path: str) -> Path:
     return p if p.is_absolute() else Path.cwd() / p
 
 
-def _strings(value: Any, n: int | None, what: str, where: Path) -> list[str]:
-    """``value`` as a list of ``n`` non-empty strings (any length when None)."""
-    ok = isinstance(value, list) and all(isinstance(v, str) and v for v in value)
+def _strings(
+    value: Any, n: int | None, what: str, where: Path, nulls: bool = False
+) -> list[str | None]:
+    """``value`` as a list of ``n`` non-empty strings (any length when None; ``nulls``: or
+    None)."""
+    ok = isinstance(value, list) and all(
+        (isinstance(v, str) and v) or (nulls and v is None) for v in value
+    )
     if not ok or (n is not None and len(value) != n):
         count = "" if n is None else f" of {n}"
         raise InputError(f"{what!r} is not a list{count} file names or hashes", where)
@@ -95,14 +123,26 @@ def _chain_row(row: dict[str, str], k: int, file: str, path: Path) -> ResultScan
     if row["has_pose"] not in ("true", "false"):
         raise InputError(f"{where}: has_pose is {row['has_pose']!r}, not true or false", path)
     has = row["has_pose"] == "true"
-    status = row.get("status") or ("ok" if has else "unposed")
-    if status not in CHAIN_STATUSES or (status == "unposed") == has:
-        raise InputError(f"{where}: status {status!r} with has_pose {row['has_pose']}", path)
+    text = row.get("status") or (NodeStatus.OK if has else NodeStatus.UNPOSED).value
+    status = _member(NodeStatus, text)
+    if status is None or (status is NodeStatus.UNPOSED) == has:
+        raise InputError(f"{where}: status {text!r} with has_pose {row['has_pose']}", path)
     T = _pose(row, where, path) if has else None
     reason = row.get("reason") or ""
-    if row.get("cluster") not in (None, "", "0"):  # posed in its own cluster's frame
-        status, reason = "other cluster", f"cluster {row['cluster']}: not tied to the anchor"
-    return ResultScan(row["file"], _file(file), status, T, reason)
+    cluster = row.get("cluster")
+    if cluster in (None, "", "0"):
+        return ResultScan(row["file"], _file(file), status, T, reason)
+    reason = f"cluster {cluster}: not tied to the anchor"  # posed in its own cluster's frame
+    return ResultScan(row["file"], _file(file), status, T, reason, other_cluster=cluster)
+
+
+def _member(kind: type[_E], value: object) -> _E | None:
+    """The member of the enum ``kind`` whose value ``value`` (read from a file) is; None when
+    there is none."""
+    try:
+        return kind(value)
+    except (ValueError, TypeError):
+        return None
 
 
 def _chain_scans(folder: Path) -> tuple[list[ResultScan], int]:
@@ -110,9 +150,11 @@ def _chain_scans(folder: Path) -> tuple[list[ResultScan], int]:
     summary = read_json_object(folder / "summary.json", "summary")
     where = folder / "summary.json"
     files = _strings(summary.get("scan_files") or summary.get("scans"), None, "scan_files", where)
-    hashes = summary.get("scan_sha256")
+    recorded = summary.get("scan_sha256")
     hashes = (
-        [""] * len(files) if hashes is None else _strings(hashes, len(files), "scan_sha256", where)
+        [None] * len(files)
+        if recorded is None
+        else _strings(recorded, len(files), "scan_sha256", where, nulls=True)
     )
     anchor = summary.get("anchor", 0)
     if type(anchor) is not int or not 0 <= anchor < len(files):
@@ -126,11 +168,11 @@ def _chain_scans(folder: Path) -> tuple[list[ResultScan], int]:
     ]
     if len({s.name for s in scans}) != len(scans):
         raise InputError("two rows name the same scan", path)
-    return [_with_hash(s, h) for s, h in zip(scans, hashes, strict=True)], anchor
-
-
-def _with_hash(scan: ResultScan, sha256: str) -> ResultScan:
-    return ResultScan(scan.name, scan.file, scan.status, scan.T_world_scan, scan.reason, sha256)
+    with_hashes = [
+        replace(s, sha256=h, hash_recorded=recorded is not None)
+        for s, h in zip(scans, hashes, strict=True)
+    ]
+    return with_hashes, anchor
 
 
 def _pair_scans(folder: Path) -> tuple[list[ResultScan], int]:
@@ -141,12 +183,13 @@ def _pair_scans(folder: Path) -> tuple[list[ResultScan], int]:
         data.get("target_file") or data.get("target"),
         data.get("source_file") or data.get("source"),
     ]
-    files = _strings(ends, 2, "target and source", path)
-    if "<array>" in files:
+    if None in ends:
         raise InputError("registered from arrays: no scan files to export", path)
-    status = data.get("status")
+    files = _strings(ends, 2, "target and source", path)
+    text = data.get("status")
+    status = _member(Status, text)
     if status not in PAIR_STATUSES:
-        raise InputError(f"status {status!r} is not one of {', '.join(PAIR_STATUSES)}", path)
+        raise InputError(f"status {text!r} is not one of {', '.join(PAIR_STATUSES)}", path)
     try:
         T = np.array(data.get("T_target_source"), dtype=float)
     except (TypeError, ValueError):
@@ -154,14 +197,21 @@ def _pair_scans(folder: Path) -> tuple[list[ResultScan], int]:
     problem = rigid_problem(T, POSE_TOLERANCE)
     if problem:
         raise InputError(f"T_target_source: {problem}", path)
-    hashes = [data.get(f"{end}_sha256") or "" for end in ("target", "source")]
+    hashes = [_recorded_hash(data, end) for end in ("target", "source")]
     warnings = data.get("warnings") or []
     reason = "; ".join(map(str, warnings)) if isinstance(warnings, list) else str(warnings)
     names = scan_names([Path(f) for f in files])
     return [
-        ResultScan(names[0], _file(files[0]), "ok", np.eye(4), "", str(hashes[0])),
-        ResultScan(names[1], _file(files[1]), status, T, reason, str(hashes[1])),
+        ResultScan(names[0], _file(files[0]), Status.OK, np.eye(4), "", None, *hashes[0]),
+        ResultScan(names[1], _file(files[1]), status, T, reason, None, *hashes[1]),
     ], 0
+
+
+def _recorded_hash(data: dict[str, Any], end: str) -> tuple[str | None, bool]:
+    """The SHA-256 a pair's ``result.json`` records for the file of its ``end`` (None when
+    the file could not be read), and whether it records one at all."""
+    value = data.get(f"{end}_sha256")
+    return (None if value is None else str(value)), f"{end}_sha256" in data
 
 
 def result_scans(folder: Path) -> tuple[list[ResultScan], int]:
@@ -224,14 +274,14 @@ def select(
             raise InputError(f"--scans names no scan of the result: {', '.join(unknown)}")
         wanted = {lookup[n] for n in names}
     keep, left = [], []
-    allowed = ("ok", "suspect") if include_suspect else ("ok",)
     for k in sorted(wanted):
         s = scans[k]
-        if s.T_world_scan is not None and s.status in allowed:
+        if s.exportable(include_suspect):
             keep.append(k)
         else:
-            hint = " (--include-suspect exports it)" if s.status == "suspect" else ""
-            left.append(f"{s.name}: {s.status}{': ' + s.reason if s.reason else ''}{hint}")
+            suspect = s.other_cluster is None and s.status in _SUSPECT
+            hint = " (--include-suspect exports it)" if suspect else ""
+            left.append(f"{s.name}: {s.shown}{': ' + s.reason if s.reason else ''}{hint}")
     return keep, left
 
 
@@ -240,7 +290,7 @@ def check_scan_files(scans: list[ResultScan], keep: list[int]) -> None:
     records no hash (made by an older ndt-cli) is exported with a warning."""
     for k in keep:
         scan = scans[k]
-        if not scan.sha256:
+        if not scan.hash_recorded:
             log.warning("%s: the result records no SHA-256 of this file: not checked", scan.file)
             continue
         if file_hash(scan.file) != scan.sha256:
