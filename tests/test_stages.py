@@ -104,6 +104,36 @@ def test_a_large_icp_correction_is_not_applied():
     assert no.icp is not None  # the attempt is still reported
 
 
+def test_a_rejected_icp_correction_is_a_field_that_decides_the_link_covariance():
+    """The rejection travels as ``icp_rejected`` (through the link files too), not as text: a
+    link whose ICP was rejected gets the NDT covariance, whatever its warnings say."""
+    from ndt_cli.ndt.result import RegistrationResult
+    from ndt_cli.pipeline.solution import link_covariance
+
+    rng = np.random.default_rng(5)
+    target = _room(rng)
+    source = _apply(np.linalg.inv(_rigid([0.0, 0.0, 0.5], [0.4, 0.0, 0.0])), _room(rng))
+    zero = np.zeros(3)
+    no = refine_pose(target, source, zero, zero, np.eye(4), RefineConfig(max_correction=0.2), 0.2)
+    assert no.rejection is not None and no.rejection.moved_m == pytest.approx(0.4, abs=0.01)
+    assert no.rejected == no.rejection.describe()
+
+    def result(rejected: bool, warnings: tuple[str, ...]) -> RegistrationResult:
+        H = np.diag([1e4, 2e4, 3e4, 4e4, 5e4, 6e4])
+        args = (np.eye(4), Status.OK, True, 1.0, 1.0, 1.0, (), (), (), np.diag([9.0, 8.0, 7.0]))
+        return RegistrationResult(
+            *args, 0, 0, 0, warnings=warnings, icp_rms=0.01, icp_hessian=H,
+            icp_centroid=np.zeros(3), icp_rejected=rejected,
+        )  # fmt: skip
+
+    kept = link_covariance(result(False, (no.rejected,)))  # the text alone decides nothing
+    dropped = link_covariance(result(True, ()))
+    assert not np.allclose(kept, dropped)
+    np.testing.assert_allclose(kept, link_covariance(result(False, ())))
+    for rejected in (True, False):  # kept in the link files
+        assert RegistrationResult.from_dict(result(rejected, ()).to_dict()).icp_rejected is rejected
+
+
 def test_refinement_works_in_reduced_frames():
     """Scans whose reduction points lie 5e6 m from the origin: ICP runs on the reduced points,
     and the refined transform is in the scans' own frames."""

@@ -118,8 +118,8 @@ def icp_warnings(
 ) -> tuple[list[str], np.ndarray | None]:
     """Warnings of the ICP refinement (a rejected correction, a weak translation), and the weak
     direction in the levelled target frame (``level``: target axes to levelled axes)."""
-    if refined.rejected:
-        return [refined.rejected], None
+    if refined.rejection is not None:
+        return [refined.rejection.describe()], None
     if refined.icp is None:
         return [], None
     weak, constraint = refined.icp.weakest_translation()
@@ -191,5 +191,5 @@ def judge(
         status = Status.DEGENERATE
     else:
         status = Status.SUSPECT if warnings else Status.OK
-    refuted = bool(contradicts or refined.rejected)
+    refuted = bool(contradicts or refined.rejection is not None)
     return Verdict(status, tuple(warnings), weak, tuple(notes), refuted)

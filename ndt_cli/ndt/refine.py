@@ -122,14 +122,33 @@ def icp(
 
 
 @dataclass(frozen=True)
+class Rejection:
+    """An ICP correction that was not applied (too large, or ICP found no fit): how far it
+    would have moved the pose, m and degrees (the target's reduced frame)."""
+
+    moved_m: float
+    moved_deg: float
+
+    def describe(self) -> str:
+        """The warning a rejected correction gives."""
+        return f"ICP refinement rejected (it moved {self.moved_m:.2f} m, {self.moved_deg:.2f} deg)"
+
+
+@dataclass(frozen=True)
 class Refinement:
     """``T_target_source`` after refinement (unchanged when ICP was not run or its correction
-    was rejected), the ICP outcome (None when not run) and why a correction was rejected."""
+    was rejected), the ICP outcome (None when not run) and, when its correction was not
+    applied, the :class:`Rejection` (None when it was, or ICP did not run)."""
 
     T: np.ndarray
     icp: IcpResult | None = None
-    rejected: str = ""
+    rejection: Rejection | None = None
     start: np.ndarray | None = None  # the pose refinement started from (the NDT result)
+
+    @property
+    def rejected(self) -> str:
+        """The warning of a correction that was not applied ('' when it was, or no ICP)."""
+        return "" if self.rejection is None else self.rejection.describe()
 
 
 def refine_pose(
@@ -166,11 +185,6 @@ def refine_pose(
         or moved_m > refine.max_correction
         or moved_deg > refine.max_correction
     ):
-        return Refinement(
-            T,
-            res,
-            f"ICP refinement rejected (it moved {moved_m:.2f} m, {moved_deg:.2f} deg)",
-            T,
-        )
+        return Refinement(T, res, Rejection(moved_m, moved_deg), T)
     T_icp = translation(target_reduction) @ res.T @ translation(-source_reduction)
     return Refinement(T_icp, res, start=T)

@@ -286,6 +286,7 @@ def _result(
         icp_rms=float("nan") if icp is None else icp.rms,
         icp_inliers=0 if icp is None else icp.inliers,
         icp_hessian=None if icp is None else icp.hessian,
+        icp_rejected=s.refinement.rejection is not None,
         overlap_3d=float("nan") if icp is None else icp.overlap,
         weak_direction=s.verdict.weak_direction,
         timings=timings,

@@ -100,6 +100,7 @@ class RegistrationResult:
     icp_rms: float = float("nan")  # RMS of the inlier point-to-plane distances after ICP, m
     icp_inliers: int = 0
     icp_hessian: np.ndarray | None = None
+    icp_rejected: bool = False  # ICP ran but its correction was not applied (see warnings)
     overlap_3d: float = float("nan")
     weak_direction: np.ndarray | None = None
     timings: dict[str, float] = field(default_factory=dict)  # s: grid_s, ndt_s, refine_s
@@ -219,6 +220,7 @@ class RegistrationResult:
             "degenerate": self.degenerate,
             "hessian_eigenvalues": self.hessian_eigenvalues.tolist(),
             "icp_hessian": _list(self.icp_hessian),
+            "icp_rejected": self.icp_rejected,
             "icp_hessian_eigenvalues": self.icp_hessian_eigenvalues.tolist(),
             "timings": dict(self.timings),
             "weak_direction": _list(self.weak_direction),

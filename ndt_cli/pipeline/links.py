@@ -27,7 +27,7 @@ from ndt_cli.ndt.result import RegistrationResult, Status
 from ndt_cli.pipeline.network import LinkKind
 
 LINK_FOLDER = "links"
-_FORMAT = 3  # version of the link files: older ones are recomputed, not misread
+_FORMAT = 4  # version of the link files: older ones are recomputed, not misread
 
 
 def link_key(target_hash: str, source_hash: str, cfg_text: str) -> str:

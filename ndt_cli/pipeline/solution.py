@@ -94,8 +94,7 @@ def link_covariance(r: RegistrationResult) -> np.ndarray:
     corridor's axis down. Its horizontal translation is "unknown" (as
     :data:`~ndt_cli.pipeline.covariance.DEFAULT_MAX_SIGMA`); its rotation and height count."""
     refined = r.icp_hessian is not None and np.isfinite(r.icp_rms) and r.icp_centroid is not None
-    rejected = any(w.startswith("ICP refinement rejected") for w in r.warnings)
-    if refined and not rejected:
+    if refined and not r.icp_rejected:
         cov = icp_covariance(r.icp_hessian, r.icp_centroid, r.T_reduced, r.icp_rms)
     else:
         cov = ndt_covariance(
