@@ -14,7 +14,7 @@ from conftest import added_task_order, after
 
 from ndt_cli.pipeline.executors import make_executor
 from ndt_cli.pipeline.local_pool import WorkerPool
-from ndt_cli.pipeline.workers import ExecutorKind
+from ndt_cli.pipeline.workers import ExecutorKind, Failure
 
 
 def _die() -> None:
@@ -39,6 +39,30 @@ def test_an_added_task_whose_worker_dies_fails_alone():
         pool.close()
     assert results["a"] == "a" and results["b"] == "b" and results["after"] == "after"
     assert "worker process died" in results["dies"]
+
+
+def _raise() -> None:
+    raise ValueError("a bug\nin a task")
+
+
+def test_a_failure_is_typed_and_no_value_a_task_returns_is_taken_for_one(tmp_path):
+    """A task that raises, or cannot read its scan, gives a Failure (its one-line reason);
+    a task whose value is a text gives that text, which is no Failure."""
+    from ndt_cli.config import Config
+    from ndt_cli.pipeline.tasks import prepare_scan
+
+    pool = WorkerPool(1, threads=1)
+    missing = tmp_path / "gone.laz"
+    tasks = {"text": partial(after, "text", 0.0), "raises": _raise}
+    tasks["unreadable"] = partial(prepare_scan, missing, Config())
+    try:
+        results = dict(pool.run(tasks))
+    finally:
+        pool.close()
+    assert results["text"] == "text" and not isinstance(results["text"], Failure)
+    assert isinstance(results["raises"], Failure)
+    assert results["raises"] == "worker error: a bug in a task"
+    assert isinstance(results["unreadable"], Failure) and "gone.laz" in results["unreadable"]
 
 
 def _manager_threads() -> list[threading.Thread]:

@@ -23,7 +23,7 @@ from ndt_cli.ndt.optimize import optimize
 from ndt_cli.ndt.prepare import PreparedScan
 from ndt_cli.ndt.register import register_prepared
 from ndt_cli.pipeline.local_pool import WorkerPool
-from ndt_cli.pipeline.workers import default_jobs, threads_per_job
+from ndt_cli.pipeline.workers import Failure, default_jobs, threads_per_job
 
 
 @dataclass(frozen=True)
@@ -203,7 +203,7 @@ def basin(
     rows: list[dict[str, Any]] = []
     for key in tasks:
         value = results[key]
-        if isinstance(value, str):
+        if isinstance(value, Failure):
             raise RuntimeError(f"basin task {key} failed: {value}")
         rows.extend(value)
     return rows

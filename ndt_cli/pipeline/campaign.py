@@ -67,6 +67,7 @@ from ndt_cli.pipeline.scans import file_hash, scan_names
 from ndt_cli.pipeline.solution import NetworkSolution, solve, usable
 from ndt_cli.pipeline.tasks import LinkJob, ScanSummary, register_link, register_paths
 from ndt_cli.pipeline.tasks import summarise_scan as _summarise
+from ndt_cli.pipeline.workers import Failure
 
 log = logging.getLogger(__name__)
 progress = logging.getLogger("ndt_cli.progress")
@@ -514,10 +515,10 @@ class Campaign:
                 self._summarised(key[1], value)
             else:
                 job = next(j for j in jobs if j.pair == key[1:])
-                if isinstance(value, Link):
-                    self._finish(job, value)
-                else:  # the worker died or raised: this link fails, not the run
+                if isinstance(value, Failure):  # the worker died or raised: this link fails
                     self._finish(job, job.failed(value), save=False)
+                else:
+                    self._finish(job, value)
         for job in waiting.values():  # a scan it needs could not be read
             bad = self.unreadable.get(job.target) or self.unreadable.get(job.source) or "?"
             self._finish(job, job.failed(bad), save=False)
@@ -532,8 +533,8 @@ class Campaign:
             return partial(register_link, job, self.prepared[i], self.prepared[j], self.cfg)
         return partial(register_paths, job, self.paths[i], self.paths[j], self.cfg)
 
-    def _summarised(self, i: int, value: ScanSummary | str) -> None:
-        if isinstance(value, str):
+    def _summarised(self, i: int, value: ScanSummary | Failure) -> None:
+        if isinstance(value, Failure):
             self.unreadable[i] = value
             return
         if value.prepared is not None:

@@ -16,7 +16,7 @@ from typing import Any
 
 from ndt_cli.core.logs import PROGRESS
 from ndt_cli.errors import ConfigError
-from ndt_cli.pipeline.workers import Results, Task, Then, set_threads
+from ndt_cli.pipeline.workers import Results, Task, Then, set_threads, worker_error
 
 
 def _in_worker(threads: int, task: Task) -> Any:
@@ -60,7 +60,8 @@ class DaskPool:
         """Nothing to do: the cluster is up once the client is connected."""
 
     def run(self, tasks: dict[Hashable, Task], then: Then | None = None) -> Results:
-        """Yield (key, result) as tasks finish; a task that raised yields its one-line reason.
+        """Yield (key, result) as tasks finish; a task that raised yields a
+        :class:`~ndt_cli.pipeline.workers.Failure`.
         ``then(key, result)`` returns more tasks for this run (see the executors module)."""
         from dask.distributed import as_completed
 
@@ -72,7 +73,7 @@ class DaskPool:
             try:
                 value = fut.result()
             except Exception as exc:  # KilledWorker, or a bug in the task
-                value = f"worker error: {' '.join(str(exc).split())[:200]}"
+                value = worker_error(exc)
             yield key, value
             for new, task in (then(key, value) if then else {}).items():
                 added = self._submit(run_id, new, task)

@@ -1,9 +1,9 @@
 """Where the tasks of a chain run: worker processes on this machine, or a Dask cluster.
 
 An executor runs a dict of tasks (:data:`~ndt_cli.pipeline.workers.Task`) and yields
-``(key, value)`` as they finish; a task that raised or whose worker died yields a one-line reason
-(a ``str``) instead of its value. ``then(key, value)``, called after each result is taken, may add
-tasks to the run.
+``(key, value)`` as they finish; a task that raised or whose worker died yields a
+:class:`~ndt_cli.pipeline.workers.Failure` (its one-line reason) instead of its value.
+``then(key, value)``, called after each result is taken, may add tasks to the run.
 """
 
 from __future__ import annotations

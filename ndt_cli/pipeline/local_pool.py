@@ -12,7 +12,15 @@ from collections.abc import Callable, Hashable
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 
-from ndt_cli.pipeline.workers import Results, Task, Then, set_threads, threads_per_job
+from ndt_cli.pipeline.workers import (
+    Failure,
+    Results,
+    Task,
+    Then,
+    set_threads,
+    threads_per_job,
+    worker_error,
+)
 
 log = logging.getLogger(__name__)
 
@@ -90,7 +98,7 @@ class WorkerPool:
             self._new(self.jobs).submit(os.getpid)
 
     def run(self, tasks: dict[Hashable, Task], then: Then | None = None) -> Results:
-        """Yield (key, result) as tasks finish; a task that fails yields its one-line reason.
+        """Yield (key, result) as tasks finish; a task that fails yields a :class:`Failure`.
         ``then(key, result)``, called once the caller has taken a result, returns more tasks
         for this run (keys not used before): they start at once and their results follow."""
         tasks = dict(tasks)
@@ -102,7 +110,10 @@ class WorkerPool:
             yield from _collect(pool, tasks, queue, broken, then)
             queue = [k for k in tasks if k in broken]
             if queue and workers == 1:  # in isolation the first task in line killed its worker
-                yield queue.pop(0), "the worker process died (killed, out of memory or crashed)"
+                yield (
+                    queue.pop(0),
+                    Failure("the worker process died (killed, out of memory or crashed)"),
+                )
             if queue:
                 workers = 1
                 self._new(1)
@@ -150,7 +161,7 @@ def _collect(
                 broken.append(key)
                 continue
             except Exception as exc:  # a bug in a task: report it for that task only
-                value = f"worker error: {' '.join(str(exc).split())[:200]}"
+                value = worker_error(exc)
             yield key, value
             for new, task in (then(key, value) if then else {}).items():
                 tasks[new] = task

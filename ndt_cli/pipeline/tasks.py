@@ -1,7 +1,8 @@
 """The tasks that worker processes run for a campaign: prepare a scan, register a link.
 
-Tasks never raise for a problem with the data: a scan that cannot be used becomes the one-line
-reason (a ``str``), a link that cannot be registered a failed :class:`Link`.
+Tasks never raise for a problem with the data: a scan that cannot be used becomes a
+:class:`~ndt_cli.pipeline.workers.Failure` (its one-line reason), a link that cannot be registered
+a failed :class:`Link`.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from ndt_cli.ndt.prepare import PreparedScan, load_and_prepare
 from ndt_cli.ndt.register import register_prepared
 from ndt_cli.pipeline.links import Link
 from ndt_cli.pipeline.network import LinkKind
+from ndt_cli.pipeline.workers import Failure
 
 
 @dataclass(frozen=True)
@@ -63,8 +65,8 @@ def _cache_key(path: Path, cfg: Config) -> tuple | None:
     return str(path), st.st_mtime_ns, st.st_size, cfg
 
 
-def prepare_scan(path: Path, cfg: Config) -> PreparedScan | str:
-    """The prepared scan with its free-space view, or the one-line reason why it cannot be used.
+def prepare_scan(path: Path, cfg: Config) -> PreparedScan | Failure:
+    """The prepared scan with its free-space view, or why it cannot be used.
     A worker process keeps its last prepared scans: in a network every scan is in several
     links, and a worker that reads its scans itself (Dask) prepares each at most once for them."""
     key = _cache_key(path, cfg)
@@ -74,7 +76,7 @@ def prepare_scan(path: Path, cfg: Config) -> PreparedScan | str:
     try:
         scan = load_and_prepare(path, cfg)
     except NdtError as exc:
-        return str(exc)
+        return Failure(exc)
     if cfg.search.free_space_ratio > 0:
         _ = scan.sight  # built once here, in parallel, and shipped with the scan to its links
     if key is not None:
@@ -95,11 +97,11 @@ class ScanSummary:
     prepared: PreparedScan | None = None
 
 
-def summarise_scan(path: Path, cfg: Config, ship: bool) -> ScanSummary | str:
-    """The scan's :class:`ScanSummary` (with the prepared scan when ``ship``), or the one-line
-    reason why it cannot be used."""
+def summarise_scan(path: Path, cfg: Config, ship: bool) -> ScanSummary | Failure:
+    """The scan's :class:`ScanSummary` (with the prepared scan when ``ship``), or why it cannot
+    be used."""
     value = prepare_scan(path, cfg)
-    if isinstance(value, str):
+    if isinstance(value, Failure):
         return value
     return ScanSummary(value.preview(), sketch(value), value if ship else None)
 
@@ -115,8 +117,9 @@ def register_link(job: LinkJob, target: PreparedScan, source: PreparedScan, cfg:
 
 def register_paths(job: LinkJob, target: Path, source: Path, cfg: Config) -> Link:
     """Read, prepare and register both scans in this process."""
-    scans = [prepare_scan(target, cfg), prepare_scan(source, cfg)]
-    for value in scans:
-        if isinstance(value, str):
+    tgt, src = prepare_scan(target, cfg), prepare_scan(source, cfg)
+    for value in (tgt, src):
+        if isinstance(value, Failure):
             return job.failed(value)
-    return register_link(job, scans[0], scans[1], cfg)
+    assert isinstance(tgt, PreparedScan) and isinstance(src, PreparedScan)
+    return register_link(job, tgt, src, cfg)

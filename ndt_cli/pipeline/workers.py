@@ -1,8 +1,11 @@
-"""What every worker process of a chain shares: the task type and its thread budget.
+"""What every worker process of a chain shares: the task type, its failure and its thread
+budget.
 
 A task is a picklable callable without arguments (a :func:`functools.partial` of a module-level
 function). An executor's ``run(tasks, then)`` yields results as tasks finish; ``then`` may add
-tasks to the same run as results come in (a link starts as soon as its two scans are ready).
+tasks to the same run as results come in (a link starts as soon as its two scans are ready). A
+task that cannot give its value (an unreadable scan; a task that raised, or whose worker died)
+gives a :class:`Failure` instead.
 """
 
 from __future__ import annotations
@@ -15,9 +18,17 @@ from typing import Any
 
 log = logging.getLogger(__name__)
 
+
+class Failure(str):
+    """Why a task gave no value: its one-line reason. A type of its own, so that no value a
+    task returns (a text among them) is mistaken for a failure."""
+
+    __slots__ = ()
+
+
 Task = Callable[[], Any]
 Then = Callable[[Hashable, Any], dict[Hashable, Task]]  # more tasks, given a finished one
-Results = Iterator[tuple[Hashable, Any]]  # (key, result or one-line reason), as tasks finish
+Results = Iterator[tuple[Hashable, Any]]  # (key, value or Failure), as tasks finish
 
 
 class ExecutorKind(StrEnum):
@@ -48,3 +59,8 @@ def set_threads(threads: int) -> None:
     from ndt_cli.core import threads as budget
 
     budget.set_threads(min(threads, budget.initial()))
+
+
+def worker_error(exc: BaseException) -> Failure:
+    """The failure of a task that raised (a bug in it, or a worker its cluster lost)."""
+    return Failure(f"worker error: {' '.join(str(exc).split())[:200]}")
