@@ -21,6 +21,7 @@ from typing import Any
 import pytest
 
 from ndt_cli.report.html import (
+    STATUS_CLASSES,
     Figure,
     HtmlReport,
     LinkRow,
@@ -255,6 +256,33 @@ def test_empty_report_renders() -> None:
     page = render_html(HtmlReport("Empty", "ndt-chain", "today", "ndt-cli", Verdict(True)))
     assert _parsed(page).errors == []
     assert "Result: OK" in page and "(not recorded)" in page and "none</td>" in page
+
+
+def test_every_status_a_run_gives_is_coloured_and_no_other_word_is_listed() -> None:
+    from ndt_cli.ndt.result import Status
+    from ndt_cli.pipeline.verify import EdgeState, NodeStatus
+
+    produced = {s.value for s in (*Status, *NodeStatus, *EdgeState)} | {"anchor"}
+    assert set(STATUS_CLASSES) == produced - {EdgeState.UNUSED.value}
+    assert status_class(EdgeState.UNUSED) == "none"
+    assert status_class(Status.NO_OVERLAP) == "bad" and status_class(NodeStatus.SUSPECT) == "warn"
+
+
+def test_a_report_shows_the_command_it_is_given_and_none_without_one(monkeypatch) -> None:
+    """The command line comes from the caller (the CLI); a library call shows none, never the
+    command line of the process it runs in."""
+    import sys
+
+    from ndt_cli.cli.common import command_line
+    from ndt_cli.report.html_report import render
+
+    monkeypatch.setattr(sys, "argv", ["/usr/local/bin/ndt-chain", "scan 1.laz", "-o", "out"])
+    assert command_line() == "ndt-chain 'scan 1.laz' -o out"
+    given = render(command_line(), verdict=Verdict(True))
+    assert '<th scope="row">Command</th><td><code>ndt-chain &#x27;scan 1.laz&#x27; -o out' in given
+    library = render("", verdict=Verdict(True))
+    assert ">Command<" not in library and "ndt-chain" not in library
+    assert _parsed(library).errors == []
 
 
 # ---------------------------------------------------------------- the page in a real browser

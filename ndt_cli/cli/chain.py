@@ -25,6 +25,7 @@ from ndt_cli.cli.common import (
     VerboseOpt,
     VersionOpt,
     check_out,
+    command_line,
     console,
     load_config,
     new_app,
@@ -184,7 +185,7 @@ def _run(inputs: ChainInputs, cfg: Config, opts: _Options) -> tuple[ChainResult,
         )
     runtime = time.perf_counter() - t0
     result = with_named_reasons(result)
-    write_chain_outputs(opts.out, result, cfg, runtime)
+    write_chain_outputs(opts.out, result, cfg, runtime, command_line())
     return result, runtime
 
 

@@ -265,6 +265,14 @@ def user_errors(prog: str, debug: bool, interrupted: str = "interrupted") -> Ite
     flush_messages()
 
 
+def command_line() -> str:
+    """The command line this process was started with, quoted as a shell reads it (for the
+    report's header): the program's file name, then its arguments."""
+    import shlex
+
+    return shlex.join([sys.argv[0].rsplit("/", 1)[-1], *sys.argv[1:]])
+
+
 def load_config(config: str | None, print_config: bool) -> object:
     """The effective config; with ``print_config`` it is printed (commented YAML) and the
     command ends."""

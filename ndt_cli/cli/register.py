@@ -19,6 +19,7 @@ from ndt_cli.cli.common import (
     VerboseOpt,
     VersionOpt,
     check_out,
+    command_line,
     console,
     load_config,
     new_app,
@@ -93,7 +94,7 @@ def _run(target: Path, source: Path, cfg: object, init: Path | None, out: Path) 
     from ndt_cli.report.register_outputs import write_register_outputs
 
     result = run(target, source, cfg, init=T_init)
-    write_register_outputs(out, result, cfg)
+    write_register_outputs(out, result, cfg, command_line())
     return result
 
 

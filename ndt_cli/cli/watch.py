@@ -24,6 +24,7 @@ from ndt_cli.cli.common import (
     VerboseOpt,
     VersionOpt,
     check_out,
+    command_line,
     load_config,
     new_app,
     setup_logging,
@@ -194,7 +195,7 @@ def _add(campaign: Campaign, scan: Landed, cfg: Config, out: Path) -> ChainResul
     t0 = time.perf_counter()
     campaign.add_scans([scan.path])
     result = with_named_reasons(campaign.result())
-    write_chain_outputs(out, result, cfg, time.perf_counter() - t0)
+    write_chain_outputs(out, result, cfg, time.perf_counter() - t0, command_line())
     report = campaign.report(len(result.scans) - 1, result)
     typer.echo(_line(report, time.time() - scan.mtime, time.perf_counter() - t0), err=True)
     return result

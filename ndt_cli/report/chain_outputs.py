@@ -20,8 +20,8 @@ from ndt_cli.ndt.result import Status
 from ndt_cli.pipeline.result import ChainResult
 from ndt_cli.pipeline.scans import file_hash
 from ndt_cli.pipeline.solution import ScanPose
-from ndt_cli.pipeline.verify import NodeStatus
-from ndt_cli.report.html_report import chain_report
+from ndt_cli.pipeline.verify import EdgeState, NodeStatus
+from ndt_cli.report.html_chain import chain_report
 from ndt_cli.report.tables import PAIR_COLUMNS, POSE_COLUMNS, pair_row, pose_row
 from ndt_cli.report.topview import topview_png
 
@@ -56,14 +56,14 @@ def summary(result: ChainResult, runtime_s: float) -> dict[str, Any]:
             "rejected_links": [
                 f"{result.names[k.target]} <- {result.names[k.source]}: {f.reason}"
                 for k, f in zip(result.links, sol.links, strict=True)
-                if f.state.value == "rejected"
+                if f.state is EdgeState.REJECTED
             ],
             "scans_by_status": _count(s.value for s in scans),
             "clusters": _count(str(s.cluster) for s in sol.scans if s.cluster is not None),
             "scans_not_ok": {
                 result.names[k]: f"{s.status.value}: {s.reason}"
                 for k, s in enumerate(sol.scans)
-                if s.status.value != "ok"
+                if s.status is not NodeStatus.OK
             },
             "radius_m": None if np.isnan(result.radius) else result.radius,
         },
@@ -190,7 +190,7 @@ def link_file_list(result: ChainResult) -> list[str]:
 
 def _header_poses_text(result: ChainResult) -> str | None:
     """The poses stored in E57 scan headers (reported only: registration never uses them)."""
-    from ndt_cli.io.multiscan import header_poses
+    from ndt_cli.io.multiscan_files import header_poses
 
     stored = header_poses(list(result.scans))
     if not stored:
@@ -240,11 +240,14 @@ def chain_files(result: ChainResult, cfg: Config, runtime_s: float) -> dict[str,
     return files
 
 
-def write_chain_outputs(out: Path, result: ChainResult, cfg: Config, runtime_s: float) -> None:
+def write_chain_outputs(
+    out: Path, result: ChainResult, cfg: Config, runtime_s: float, command: str = ""
+) -> None:
     """Publish every chain output and the top view as the content of ``out``, all together;
-    the links of the run are kept for ``--resume``."""
-    files: dict[str, str | bytes] = dict(chain_files(result, cfg, runtime_s))
+    the links of the run are kept for ``--resume``. ``command``: the command line that ran
+    it, for the report ('' for a library call)."""
+    text = chain_files(result, cfg, runtime_s)
     png = topview_png(result)
-    files["topview.png"] = png
-    files["report.html"] = chain_report(result, files["config_used.yaml"], runtime_s, png)
+    report = chain_report(result, text["config_used.yaml"], runtime_s, png, command)
+    files: dict[str, str | bytes] = {**text, "topview.png": png, "report.html": report}
     publish(Path(out), files)

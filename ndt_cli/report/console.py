@@ -6,6 +6,7 @@ from typing import Any
 
 from ndt_cli.ndt.result import RegistrationResult
 from ndt_cli.pipeline.result import ChainResult
+from ndt_cli.pipeline.verify import EdgeState, NodeStatus
 from ndt_cli.report.tables import pair_row
 
 
@@ -64,11 +65,11 @@ def print_chain_summary(result: ChainResult, console: Any) -> None:
             row["yaw_deg"][:9],
             row["score_per_point"][:6],
             status,
-            row["network"] + (f": {fit.reason}" if fit.state.value == "rejected" else ""),
+            row["network"] + (f": {fit.reason}" if fit.state is EdgeState.REJECTED else ""),
             row["residual_cm"],
         )
     console.print(table)
-    bad = [(k, s) for k, s in enumerate(sol.scans) if s.status.value != "ok"]
+    bad = [(k, s) for k, s in enumerate(sol.scans) if s.status is not NodeStatus.OK]
     if bad:
         scans = Table("scan", "status", "reason", title="scans that are not ok")
         for k, s in bad:

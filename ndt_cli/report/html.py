@@ -26,7 +26,16 @@ from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
 
-__all__ = ["Figure", "HtmlReport", "LinkRow", "ScanRow", "Verdict", "render_html", "status_class"]
+__all__ = [
+    "STATUS_CLASSES",
+    "Figure",
+    "HtmlReport",
+    "LinkRow",
+    "ScanRow",
+    "Verdict",
+    "render_html",
+    "status_class",
+]
 
 
 @dataclass(frozen=True)
@@ -95,7 +104,8 @@ class Figure:
 class HtmlReport:
     """Everything the report shows.
 
-    ``command``: the command line that produced the results; ``created``: when (a datetime
+    ``command``: the command line that produced the results ('' when none did: a library
+    call); ``created``: when (a datetime
     or text); ``version``: the software and its version, e.g. ``ndt-cli 0.2.0``;
     ``summary``: (label, value) pairs shown in order; ``config_yaml``: the configuration
     used, as YAML text; ``notes``: paragraphs of free text.
@@ -176,10 +186,14 @@ footer { margin-top: 2em; border-top: 1px solid var(--rule); padding-top: 0.5em;
 }
 """
 
-_OK = {"ok", "used", "confirmed", "accepted", "posed", "anchor", "passed"}
-_WARN = {"suspect", "degenerate", "warning", "weak", "unconfirmed"}
-_BAD = {"failed", "rejected", "unposed", "not_converged", "no_overlap", "unreadable", "error"}
-_BAD |= {"not_ok", "missing"}
+STATUS_CLASSES = {
+    **dict.fromkeys(("ok", "anchor", "confirmed", "used"), "ok"),
+    **dict.fromkeys(("suspect", "degenerate"), "warn"),
+    **dict.fromkeys(("failed", "not_converged", "no_overlap", "unposed", "rejected"), "bad"),
+}
+"""The colour of every status a report shows: a registration's (:class:`ndt_cli.ndt.result.Status`),
+a scan's (:class:`ndt_cli.pipeline.verify.NodeStatus`, and ``anchor``) and a link's state in the
+network (:class:`ndt_cli.pipeline.verify.EdgeState`; ``unused`` is not coloured)."""
 _DASH = "\u2013"
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -195,13 +209,7 @@ def _e(value: object) -> str:
 def status_class(status: str) -> str:
     """CSS class of a status: ``ok`` (green), ``warn`` (amber), ``bad`` (red) or ``none``."""
     key = status.strip().lower().replace(" ", "_").replace("-", "_")
-    if key in _OK:
-        return "ok"
-    if key in _WARN:
-        return "warn"
-    if key in _BAD:
-        return "bad"
-    return "none"
+    return STATUS_CLASSES.get(key, "none")
 
 
 def _badge(status: str) -> str:
@@ -330,9 +338,10 @@ def _created(created: datetime | str) -> str:
 
 
 def _header(report: HtmlReport) -> str:
-    """The header block: title, command line, creation time and software."""
+    """The header block: title, command line (when there is one), creation time and software."""
+    command = (("Command", f"<code>{_e(report.command)}</code>"),) if report.command else ()
     rows = (
-        ("Command", f"<code>{_e(report.command)}</code>"),
+        *command,
         ("Created", _e(_created(report.created))),
         ("Software", _e(report.version)),
     )
