@@ -18,6 +18,7 @@ from ndt_cli import io, sim
 from ndt_cli.config import Config
 from ndt_cli.pipeline.campaign import Campaign
 from ndt_cli.pipeline.local_pool import WorkerPool
+from ndt_cli.pipeline.verify import NodeStatus
 
 CHAIN = str(RUN_BIN / "ndt-chain")
 WATCH = str(RUN_BIN / "ndt-watch")
@@ -58,7 +59,7 @@ def scaling(sizes: tuple[int, ...] = (16, 64, 256), shuffled_up_to: int = 64) ->
             for label, s in orders:
                 files = _survey_files(s, Path(tmp) / f"{label}{n}")
                 wall, (campaign, result) = _campaign(files, Path(tmp) / f"out_{label}{n}")
-                ok = sum(x.status.value == "ok" for x in result.solution.scans)
+                ok = sum(x.status is NodeStatus.OK for x in result.solution.scans)
                 per_scan[(label, n)] = wall / n
                 rows.append(
                     [

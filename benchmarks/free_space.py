@@ -29,6 +29,7 @@ from ndt_cli.config import Config  # noqa: E402
 from ndt_cli.core.transforms import transform_errors  # noqa: E402
 from ndt_cli.ndt.prepare import PreparedScan, prepare  # noqa: E402
 from ndt_cli.ndt.register import register_prepared  # noqa: E402
+from ndt_cli.ndt.result import Status  # noqa: E402
 
 RIGHT_DEG, RIGHT_M = 0.3, 0.15
 SETTINGS = {"on": Config(), "off": Config().replace(search={"free_space_ratio": 0.0})}
@@ -61,14 +62,14 @@ def links(n_street: int, n_far: int, n_corridor: int) -> list[tuple[str, str, Li
 
 def run(
     target: PreparedScan, source: PreparedScan, truth: np.ndarray, cfg: Config
-) -> tuple[bool, str, bool, float]:
+) -> tuple[bool, Status, bool, float]:
     """(right, status, second pose kept, seconds) of one registration."""
     t0 = time.perf_counter()
     r = register_prepared(target, source, cfg)
     dt = time.perf_counter() - t0
     rot, trans = transform_errors(r.T_target_source, truth)
     kept = any(w.startswith("free space") for w in r.warnings)
-    return rot < RIGHT_DEG and trans < RIGHT_M, r.status.value, kept, dt
+    return rot < RIGHT_DEG and trans < RIGHT_M, r.status, kept, dt
 
 
 def main() -> None:
@@ -81,8 +82,8 @@ def main() -> None:
         for name, res in rows.items():
             sub = [res[k] for k in sel]
             right = sum(r[0] for r in sub)
-            ok = sum(r[1] == "ok" for r in sub)
-            false_ok = sum(r[1] == "ok" and not r[0] for r in sub)
+            ok = sum(r[1] is Status.OK for r in sub)
+            false_ok = sum(r[1] is Status.OK and not r[0] for r in sub)
             kept = sum(r[2] for r in sub)
             t = np.median([r[3] for r in sub])
             print(

@@ -40,6 +40,7 @@ from ndt_cli.ndt.prepare import prepare  # noqa: E402
 from ndt_cli.ndt.register import register_prepared  # noqa: E402
 from ndt_cli.ndt.result import Status  # noqa: E402
 from ndt_cli.pipeline.chain import run_chain  # noqa: E402
+from ndt_cli.pipeline.verify import NodeStatus  # noqa: E402
 from ndt_cli.sim.worlds import DENSE, StreetWorld  # noqa: E402
 
 CACHE = ROOT / "benchmarks" / ".cache" / "trust"
@@ -234,8 +235,8 @@ def run_case(case: Case, cfg: Config, jobs: int) -> tuple[trust.TrustCounts, dic
         "bad_scans": [
             x
             for x, e in zip(scans, case.expected, strict=True)
-            if (e and x.status.value != "ok")
-            or (x.status.value == "ok" and not x.correct)
+            if (e and x.status is not NodeStatus.OK)
+            or (x.status is NodeStatus.OK and not x.correct)
             or (e and x.cluster != 0)
         ],
     }
@@ -259,7 +260,7 @@ def cross_scene_pairs(cfg: Config, n: int = 12) -> list[dict]:
                 "source": 1,
                 "kind": "cross",
                 "correct": False,
-                "status": r.status.value,
+                "status": r.status,  # written as its value
                 "state": "",
                 **trust.metrics(r),
                 "warnings": "; ".join(r.warnings),
@@ -343,7 +344,7 @@ def main() -> None:
                 )
     cross = cross_scene_pairs(cfg, args.cross)
     rows += cross
-    ok = sum(r["status"] == "ok" for r in cross)
+    ok = sum(r["status"] is Status.OK for r in cross)
     print(f"cross-scene pairs: {ok}/{len(cross)} ok (must be 0)")
     _write(args.links, rows)
     for kind, c in total.items():
