@@ -81,12 +81,6 @@ class OutputError(NdtError):
     exit_code = EXIT_INPUT
 
 
-class RegistrationError(NdtError):
-    """Registration ran but failed (e.g. no overlap: the score is zero)."""
-
-    exit_code = EXIT_REGISTRATION
-
-
 class UserInterruptError(NdtError):
     """Stopped by Ctrl-C / SIGINT; what finished is kept (``ndt-chain --resume`` continues)."""
 
