@@ -18,7 +18,7 @@ from ndt_cli import io as ndt_io
 from ndt_cli.errors import InputError, OutputError
 from ndt_cli.io import formats
 from ndt_cli.io.formats import LasReader
-from ndt_cli.io.multiscan import expand
+from ndt_cli.io.multiscan_files import expand
 from ndt_cli.io.points import READERS
 
 ALL_SUFFIXES = (".ply", ".las", ".laz", ".pcd", ".xyz", ".txt", ".csv")

@@ -21,7 +21,7 @@ from ndt_cli.errors import InputError
 from ndt_cli.io import ptx, read
 from ndt_cli.io.export import ExportScan, export
 from ndt_cli.io.matrices import read_pose_list
-from ndt_cli.io.multiscan import expand, header_pose
+from ndt_cli.io.multiscan_files import expand, header_pose
 from ndt_cli.io.records import iter_records, summary
 
 runner = CliRunner()

@@ -35,7 +35,7 @@ class ChainInputs:
 def campaign_scans(scans: Sequence[str | Path]) -> list[Path]:
     """The scans in campaign order: natural order of their names, each E57 file expanded into
     its scans (``FILE.e57#K``; PTX files likewise)."""
-    from ndt_cli.io.multiscan import expand
+    from ndt_cli.io.multiscan_files import expand
 
     return expand(natural_sort(scans))
 
