@@ -41,6 +41,7 @@ from ndt_cli.ndt.overlap import COARSE_WINDOW, CoarseMatch, coarse_match
 from ndt_cli.ndt.prepare import PreparedScan
 from ndt_cli.ndt.result import Status
 from ndt_cli.pipeline.control import Station, matched
+from ndt_cli.pipeline.datum import WorldFrame
 from ndt_cli.pipeline.discovery import (
     HINTS,
     Placed,
@@ -188,7 +189,7 @@ class Campaign:
 
     def _world_system(self, solution: NetworkSolution) -> dict[str, Any]:
         """The coordinate system of the world and its scale, when control made the world."""
-        if solution.datum is None or solution.datum.frame != "control":
+        if solution.datum is None or solution.datum.frame is not WorldFrame.CONTROL:
             return {}
         return {"crs": self.net.crs, "grid_scale": self.net.grid_scale}
 

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from enum import StrEnum
 
 import numpy as np
 
@@ -69,6 +70,19 @@ class ControlFit:
         return None if self.adjusted is None else self.adjusted - self.control.xyz
 
 
+class WorldFrame(StrEnum):
+    """What the world frame is; the value is what summary.json holds."""
+
+    LEVELLED = "levelled"  # the anchor's frame tipped level about its ground point
+    GEOREFERENCED = "the anchor's own (georeferenced)"  # kept as it is
+    CONTROL = "control"  # the coordinates of two or more control stations
+    CONTROL_HEADING = "control, heading from the anchor"  # one station: the anchor's heading
+
+    @property
+    def from_control(self) -> bool:
+        return self in (WorldFrame.CONTROL, WorldFrame.CONTROL_HEADING)
+
+
 @dataclass(frozen=True)
 class Datum:
     """How the anchor's cluster sits in the world: ``T_world_node`` of each of its nodes (the
@@ -77,7 +91,7 @@ class Datum:
 
     poses: dict[int, np.ndarray]
     covariances: dict[int, np.ndarray]
-    frame: str
+    frame: WorldFrame
     controls: tuple[ControlFit, ...]
     vertical_sigma_deg: float
 
@@ -145,7 +159,7 @@ def _on_grid(
     scanner moved to where the grid has it (x, y scaled by ``K`` about ``centre``), its
     orientation kept; the stations as given."""
     given = {c.scan: c for c in controls}
-    if not world.frame.startswith("control"):
+    if not world.frame.from_control:
         fits = tuple(replace(f, control=given[f.control.scan]) for f in world.controls)
         return replace(world, controls=fits)
     poses = {}
@@ -174,7 +188,7 @@ def _datum(
     georeferenced = np.linalg.norm(ground) > GEOREFERENCED_M
     W = np.eye(4) if georeferenced else translation(ground) @ _levelled(up) @ translation(-ground)
     levelled = {v: W @ T for v, T in cluster.poses.items()}
-    frame = "the anchor's own (georeferenced)" if georeferenced else "levelled"
+    frame = WorldFrame.GEOREFERENCED if georeferenced else WorldFrame.LEVELLED
     usable = [c for c in controls if c.scan in cluster.poses]
     fits = [ControlFit(c, None, False, "its scan is not in the anchor's cluster") for c in controls]
     fits = [f for f in fits if f.control not in usable]
@@ -183,7 +197,7 @@ def _datum(
         if adjusted is not None:
             poses, covariances, used = adjusted
             fits += [_fit(c, poses, cluster, c in used) for c in usable]
-            return Datum(poses, covariances, "control", tuple(fits), sigma)
+            return Datum(poses, covariances, WorldFrame.CONTROL, tuple(fits), sigma)
         fits += [
             ControlFit(
                 c,
@@ -200,7 +214,7 @@ def _datum(
         shift = translation(c.xyz - _scanner(levelled[c.scan], cluster.reductions[c.scan]))
         poses = {v: shift @ T for v, T in levelled.items()}
         fits.append(_fit(c, poses, cluster, True, "one station: position only"))
-        return Datum(poses, {}, "control, heading from the anchor", tuple(fits), sigma)
+        return Datum(poses, {}, WorldFrame.CONTROL_HEADING, tuple(fits), sigma)
     return Datum(levelled, {}, frame, tuple(fits), sigma)
 
 

@@ -34,6 +34,7 @@ from ndt_cli.io.outdir import check_unchanged
 from ndt_cli.io.records import RawVlr
 from ndt_cli.io.serialize import read_json_object, read_table
 from ndt_cli.ndt.result import Status
+from ndt_cli.pipeline.datum import WorldFrame
 from ndt_cli.pipeline.scans import file_hash, scan_names
 from ndt_cli.pipeline.verify import NodeStatus
 
@@ -234,11 +235,11 @@ def result_crs(folder: Path) -> tuple[RawVlr, ...] | None:
     if not path.exists():
         return None
     world = read_json_object(path, "summary").get("world")
-    frame = str(world.get("frame", "")) if isinstance(world, dict) else ""
-    if not frame.startswith("control"):
+    frame = _member(WorldFrame, world.get("frame")) if isinstance(world, dict) else None
+    if frame is None or not frame.from_control:
         return None
     wkt = world.get("crs")
-    if not wkt or frame != "control":
+    if not wkt or frame is not WorldFrame.CONTROL:
         why = "one station: its heading is the anchor's" if wkt else "of no named CRS"
         log.warning("%s: the world is the control's frame, %s: no CRS written", folder, why)
         return ()

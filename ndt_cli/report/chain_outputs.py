@@ -11,7 +11,6 @@ import numpy as np
 
 from ndt_cli.config.loading import dump
 from ndt_cli.config.schema import Config
-from ndt_cli.io.crs import crs_name
 from ndt_cli.io.matrices import format_matrix, format_pose_line, quote_name
 from ndt_cli.io.names import link_file_names, pose_file_names
 from ndt_cli.io.outdir import publish
@@ -24,6 +23,7 @@ from ndt_cli.pipeline.verify import EdgeState, NodeStatus
 from ndt_cli.report.html_chain import chain_report
 from ndt_cli.report.tables import PAIR_COLUMNS, POSE_COLUMNS, pair_row, pose_row
 from ndt_cli.report.topview import topview_png
+from ndt_cli.report.world import world_line, world_summary
 
 
 def summary(result: ChainResult, runtime_s: float) -> dict[str, Any]:
@@ -69,54 +69,6 @@ def summary(result: ChainResult, runtime_s: float) -> dict[str, Any]:
         },
         "world": world_summary(result),
     }
-
-
-def world_summary(result: ChainResult) -> dict[str, Any]:
-    """What the world frame is (:mod:`ndt_cli.pipeline.datum`) and, per control station,
-    the given and adjusted coordinates of its scanner and their difference (cm)."""
-    datum = result.solution.datum
-    if datum is None:
-        return {"frame": f"the anchor's own: {result.names[result.anchor]}", "controls": []}
-    rows = []
-    for fit in datum.controls:
-        c, r = fit.control, fit.residual
-        rows.append(
-            {
-                "scan": c.name,
-                "given": c.xyz.tolist(),
-                "sigma_xy": c.sigma_xy,
-                "sigma_z": c.sigma_z,
-                "adjusted": None if fit.adjusted is None else fit.adjusted.tolist(),
-                "residual_cm": None if r is None else [round(100 * v, 2) for v in r],
-                "used": fit.used,
-                "reason": fit.reason,
-            }
-        )
-    return {
-        "frame": datum.frame,
-        "anchor": result.names[result.anchor],
-        "crs": result.crs or None,
-        "grid_scale": result.grid_scale,
-        "vertical_sigma_deg": datum.vertical_sigma_deg,
-        "controls": rows,
-    }
-
-
-def world_line(result: ChainResult) -> str:
-    """One line saying what the world frame of the poses is."""
-    anchor = quote_name(result.names[result.anchor])
-    datum = result.solution.datum
-    if datum is None:
-        return f"world frame = frame of {anchor}"
-    if datum.frame == "control":
-        used = sum(f.used for f in datum.controls)
-        where = crs_name(result.crs) if result.crs else "the control's coordinates"
-        return f"world frame = {where}, from {used} control station(s); z the vertical"
-    if datum.frame.startswith("control"):
-        return f"world frame = the control's coordinates at one station, heading of {anchor}"
-    if datum.frame == "levelled":
-        return f"world frame = frame of {anchor} tipped level about its ground point (z up)"
-    return f"world frame = frame of {anchor} (georeferenced: kept as it is)"
 
 
 def _count(values: Any) -> dict[str, int]:

@@ -84,7 +84,7 @@ def _print_controls(result: Any, console: Any) -> None:
     """The control stations: given and adjusted coordinates, residual (cm), used or not."""
     from rich.table import Table
 
-    from ndt_cli.report.chain_outputs import world_line, world_summary
+    from ndt_cli.report.world import world_line, world_summary
 
     rows = world_summary(result)["controls"]
     if rows:

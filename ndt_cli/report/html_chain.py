@@ -15,6 +15,7 @@ from ndt_cli.pipeline.solution import LinkFit, ScanPose
 from ndt_cli.pipeline.verify import EdgeState, NodeStatus
 from ndt_cli.report.html import Figure, LinkRow, ScanRow, Verdict
 from ndt_cli.report.html_report import finite, render
+from ndt_cli.report.world import world_line, world_summary
 
 
 def _scan_row(name: str, scan: ScanPose, anchor: bool) -> ScanRow:
@@ -60,7 +61,7 @@ def chain_report(
     solved = "adjusted; " if sol.adjusted else "chained, not adjusted; "
     summary = (
         ("scans", f"{len(sol.scans) - len(not_ok)} of {len(sol.scans)} ok"),
-        ("world frame", _world_line(result).removeprefix("world frame = ")),
+        ("world frame", world_line(result).removeprefix("world frame = ")),
         *_control_rows(result),
         ("links", f"{len(result.links)}: " + _counts(k.kind.value for k in result.links)),
         ("network", solved + _counts(states)),
@@ -82,17 +83,9 @@ def chain_report(
     )
 
 
-def _world_line(result: ChainResult) -> str:
-    from ndt_cli.report.chain_outputs import world_line
-
-    return world_line(result)
-
-
 def _control_rows(result: ChainResult) -> tuple[tuple[str, str], ...]:
     """A summary row per control station: its given coordinates, the adjusted minus the given
     (cm: east, north, height) and whether the adjustment used it."""
-    from ndt_cli.report.chain_outputs import world_summary
-
     rows = []
     for r in world_summary(result)["controls"]:
         given = " ".join(f"{v:.3f}" for v in r["given"])
