@@ -30,16 +30,14 @@ def _with_files(result: RegistrationResult) -> dict:
     return data
 
 
-def register_files(result: RegistrationResult, cfg: Config, command: str = "") -> dict[str, str]:
-    """Every output of a registration, by file name (``command``: the command line that ran
-    it, for the report; '' for a library call)."""
-    config = dump(cfg)
+def register_files(result: RegistrationResult, cfg: Config) -> dict[str, str]:
+    """The text outputs of a registration, by file name: the transform, the CSV report, the
+    JSON result and the config used."""
     return {
         "T_target_source.txt": format_matrix(result.T_target_source),
         "report.csv": csv_text([report_row(result)], REPORT_COLUMNS),
         "result.json": to_json(_with_files(result)),
-        "config_used.yaml": config,
-        "report.html": register_report(result, config, command),
+        "config_used.yaml": dump(cfg),
     }
 
 
@@ -47,8 +45,11 @@ def write_register_outputs(
     out_dir: str | Path, result: RegistrationResult, cfg: Config, command: str = ""
 ) -> list[Path]:
     """Publish T_target_source.txt, report.csv, result.json, config_used.yaml and report.html
-    as the content of ``out_dir``, all together (``command``: as :func:`register_files`)."""
+    as the content of ``out_dir``, all together. ``command``: the command line that ran the
+    registration, for the report ('' for a library call)."""
     out = Path(out_dir)
-    files = register_files(result, cfg, command)
+    text = register_files(result, cfg)
+    report = register_report(result, text["config_used.yaml"], command)
+    files = {**text, "report.html": report}
     publish(out, files)
     return [out / name for name in files]
