@@ -73,7 +73,7 @@ def readme_text(
     return f"""# Sample data: simulated terrestrial laser scans of a street
 
 Synthetic data, no real measurements: {len(scans)} static terrestrial laser scans of one street,
-made by the deterministic ray-casting simulator `ndt_cli/sim.py`. The street runs along
+made by the deterministic ray-casting simulator `ndt_cli/sim/`. The street runs along
 the world x axis with buildings on both sides (blocks 8-30 m wide, 6-25 m high, with depth,
 gaps and side streets, facade relief of 0.1-0.6 m: window and door niches, balconies,
 pilasters, cornices), parked cars, lamp posts, sign posts and tree trunks on a flat ground
