@@ -17,6 +17,7 @@ still be the one registered (the SHA-256 the result records). Anything else is a
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from enum import Enum
 from pathlib import Path
@@ -85,18 +86,27 @@ def _file(path: str) -> Path:
     return p if p.is_absolute() else Path.cwd() / p
 
 
-def _strings(
-    value: Any, n: int | None, what: str, where: Path, nulls: bool = False
-) -> list[str | None]:
-    """``value`` as a list of ``n`` non-empty strings (any length when None; ``nulls``: or
-    None)."""
-    ok = isinstance(value, list) and all(
-        (isinstance(v, str) and v) or (nulls and v is None) for v in value
-    )
+def _filled(v: Any) -> bool:
+    return isinstance(v, str) and bool(v)
+
+
+def _list(value: Any, n: int | None, what: str, where: Path, item: Callable[[Any], bool]) -> list:
+    """``value`` as a list of ``n`` items (any length when None) that pass ``item``."""
+    ok = isinstance(value, list) and all(item(v) for v in value)
     if not ok or (n is not None and len(value) != n):
         count = "" if n is None else f" of {n}"
         raise InputError(f"{what!r} is not a list{count} file names or hashes", where)
     return value
+
+
+def _strings(value: Any, n: int | None, what: str, where: Path) -> list[str]:
+    """``value`` as a list of ``n`` non-empty strings (any length when None)."""
+    return _list(value, n, what, where, _filled)
+
+
+def _hashes(value: Any, n: int, where: Path) -> list[str | None]:
+    """summary.json's ``scan_sha256``: a SHA-256 per scan (None: its file could not be read)."""
+    return _list(value, n, "scan_sha256", where, lambda v: v is None or _filled(v))
 
 
 def _pose(row: dict[str, str], where: str, path: Path) -> np.ndarray:
@@ -152,11 +162,7 @@ def _chain_scans(folder: Path) -> tuple[list[ResultScan], int]:
     where = folder / "summary.json"
     files = _strings(summary.get("scan_files") or summary.get("scans"), None, "scan_files", where)
     recorded = summary.get("scan_sha256")
-    hashes = (
-        [None] * len(files)
-        if recorded is None
-        else _strings(recorded, len(files), "scan_sha256", where, nulls=True)
-    )
+    hashes = [None] * len(files) if recorded is None else _hashes(recorded, len(files), where)
     anchor = summary.get("anchor", 0)
     if type(anchor) is not int or not 0 <= anchor < len(files):
         raise InputError(f"anchor {anchor!r} is not a scan index", where)
@@ -198,21 +204,22 @@ def _pair_scans(folder: Path) -> tuple[list[ResultScan], int]:
     problem = rigid_problem(T, POSE_TOLERANCE)
     if problem:
         raise InputError(f"T_target_source: {problem}", path)
-    hashes = [_recorded_hash(data, end) for end in ("target", "source")]
     warnings = data.get("warnings") or []
     reason = "; ".join(map(str, warnings)) if isinstance(warnings, list) else str(warnings)
     names = scan_names([Path(f) for f in files])
     return [
-        ResultScan(names[0], _file(files[0]), Status.OK, np.eye(4), "", None, *hashes[0]),
-        ResultScan(names[1], _file(files[1]), status, T, reason, None, *hashes[1]),
+        ResultScan(names[0], _file(files[0]), Status.OK, np.eye(4), **_hash_of(data, "target")),
+        ResultScan(names[1], _file(files[1]), status, T, reason, **_hash_of(data, "source")),
     ], 0
 
 
-def _recorded_hash(data: dict[str, Any], end: str) -> tuple[str | None, bool]:
-    """The SHA-256 a pair's ``result.json`` records for the file of its ``end`` (None when
-    the file could not be read), and whether it records one at all."""
-    value = data.get(f"{end}_sha256")
-    return (None if value is None else str(value)), f"{end}_sha256" in data
+def _hash_of(data: dict[str, Any], end: str) -> dict[str, Any]:
+    """The SHA-256 a pair's ``result.json`` records for the file of its ``end`` (None when the
+    file could not be read), and whether it records one at all (as :class:`ResultScan`'s
+    fields)."""
+    key = f"{end}_sha256"
+    value = data.get(key)
+    return {"sha256": None if value is None else str(value), "hash_recorded": key in data}
 
 
 def result_scans(folder: Path) -> tuple[list[ResultScan], int]:
