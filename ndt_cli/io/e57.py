@@ -8,6 +8,7 @@ reported, never used for registration).
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -48,27 +49,89 @@ def check_scan(spec: str | Path) -> None:
         e57.close()
 
 
-def read_xyz(spec: str | Path) -> np.ndarray:
-    """(N,3) float64 points of one scan, in the scan's own frame (header pose not applied)."""
+_CARTESIAN = ("cartesianX", "cartesianY", "cartesianZ")
+_SPHERICAL = ("sphericalRange", "sphericalAzimuth", "sphericalElevation")
+CHUNK = 4_000_000  # records read at a time by read_xyz
+
+
+def record_count(spec: str | Path) -> int:
+    """Point records of the scan ``spec`` names (its header's count, invalid records too)."""
     path, index = split_spec(spec)
     e57 = open_file(path)
     try:
         k = which_scan(path, index, int(e57.scan_count), str(spec))
-        data = e57.read_scan(k, transform=False, ignore_missing_fields=True)
+        return int(e57.get_header(k).point_count)
+    finally:
+        e57.close()
+
+
+def _coordinates(fields: list[str], spec: str | Path) -> tuple[tuple[str, ...], str]:
+    """The scan's coordinate fields (cartesian when it has them, as pye57 chooses) and the name
+    of their invalid-state field."""
+    if all(f in fields for f in _CARTESIAN):
+        return _CARTESIAN, "cartesianInvalidState"
+    if all(f in fields for f in _SPHERICAL):
+        return _SPHERICAL, "sphericalInvalidState"
+    raise InputError("the scan has neither cartesian nor spherical coordinates", spec)
+
+
+def _cartesian(arrays: dict[str, np.ndarray], names: tuple[str, ...], n: int) -> np.ndarray:
+    """(n,3) float64 x, y, z of the first ``n`` buffered records (spherical ones converted)."""
+    a, b, c = (arrays[name][:n] for name in names)
+    if names == _CARTESIAN:
+        out = np.empty((n, 3))
+        out[:, 0], out[:, 1], out[:, 2] = a, b, c
+        return out
+    r, az, el = a, b, c  # as pye57 converts them
+    return np.column_stack(
+        [r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)]
+    )
+
+
+def _chunks(e57: Any, k: int, spec: str | Path, chunk_size: int) -> Iterator[np.ndarray]:
+    """The valid points of scan ``k`` of the open file, ``chunk_size`` records at a time."""
+    from pye57 import libe57
+
+    header = e57.get_header(k)
+    fields = list(header.point_fields)
+    names, state = _coordinates(fields, spec)
+    cap = int(min(chunk_size, max(1, header.point_count)))
+    arrays = {name: np.empty(cap, np.float64) for name in names}
+    if state in fields:
+        arrays[state] = np.empty(cap, np.int8)
+    buffers = libe57.VectorSourceDestBuffer()
+    for name, arr in arrays.items():
+        buffers.append(libe57.SourceDestBuffer(e57.image_file, name, arr, cap, True, True))
+    reader = header.points.reader(buffers)
+    try:
+        while n := reader.read():
+            xyz = _cartesian(arrays, names, n)
+            yield xyz if state not in arrays else xyz[arrays[state][:n] == 0]
+    finally:
+        reader.close()
+
+
+def iter_xyz(spec: str | Path, chunk_size: int = CHUNK) -> Iterator[np.ndarray]:
+    """(m,3) float64 points of one scan, ``chunk_size`` records at a time through libE57's
+    buffers, in the scan's own frame (header pose not applied), invalid records left out (the
+    points pye57's ``read_scan`` gives), so memory stays bounded by the chunk."""
+    path, index = split_spec(spec)
+    e57 = open_file(path)
+    try:
+        k = which_scan(path, index, int(e57.scan_count), str(spec))
+        yield from _chunks(e57, k, spec, chunk_size)
     except InputError:
         raise
     except Exception as exc:
         raise InputError(f"cannot read E57 scan: {one_line(exc)}", spec) from None
     finally:
         e57.close()
-    if "cartesianX" in data:
-        return np.column_stack([data["cartesianX"], data["cartesianY"], data["cartesianZ"]])
-    if "sphericalRange" in data:
-        r, az, el = data["sphericalRange"], data["sphericalAzimuth"], data["sphericalElevation"]
-        return np.column_stack(
-            [r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)]
-        ).astype(np.float64)
-    raise InputError("the scan has neither cartesian nor spherical coordinates", spec)
+
+
+def read_xyz(spec: str | Path) -> np.ndarray:
+    """(N,3) float64 points of one scan, in the scan's own frame (header pose not applied)."""
+    parts = list(iter_xyz(spec))
+    return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
 
 def header_pose(spec: str | Path) -> np.ndarray | None:
