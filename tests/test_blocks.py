@@ -60,6 +60,23 @@ def test_zero_rows_are_the_rows_that_scale_to_the_origin():
     np.testing.assert_array_equal(xyz, reference)
 
 
+@pytest.mark.parametrize("scale", [0.001, 1e300])
+def test_integer_blocks_find_the_rows_a_whole_read_drops(scale):
+    from ndt_cli.io.blocks import unusable_integers
+    from ndt_cli.io.points import unusable
+
+    values = np.random.default_rng(2).integers(-5, 5, (2000, 3)).astype(np.int32)
+    values[:3] = 2_000_000_000  # overflows to inf at scale 1e300
+    values[10:20] = 0
+    block = Block(values, np.full(3, scale), np.zeros(3))
+    with np.errstate(over="ignore", invalid="ignore"):
+        expected = unusable(block.xyz())
+        got = unusable_integers(block)
+    for a, b in zip(got, expected, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert got[1].sum() > 5 and (got[0].sum() == 3) == (scale > 1)
+
+
 @pytest.mark.parametrize("suffix", [".las", ".laz"])
 def test_blocks_hold_a_las_files_integers_and_give_its_coordinates(tmp_path, suffix):
     rng = np.random.default_rng(4)

@@ -78,6 +78,21 @@ def zero_interval(scale: float, offset: float) -> tuple[int, int] | None:
     return (start, stop) if start <= stop else None
 
 
+FINITE_BOUND = 1e300  # an axis whose largest scaled integer stays below this is finite
+
+
+def unusable_integers(block: Block) -> tuple[np.ndarray, np.ndarray]:
+    """Masks of the rows of an integer block whose coordinates are not finite (a scale so large
+    that ``X * scale`` overflows), and of those exactly (0,0,0). Without scaling the integers
+    themselves (12 bytes a point), unless some axis could overflow."""
+    scale, offset = np.abs(block.scale), np.abs(block.offset)  # type: ignore[arg-type]
+    if np.all(2.0**31 * scale + offset < FINITE_BOUND):
+        return np.zeros(len(block), bool), zero_rows(block)
+    xyz = block.xyz()
+    with np.errstate(invalid="ignore"):
+        return ~np.isfinite(xyz).all(axis=1), (xyz == 0.0).all(axis=1)
+
+
 def zero_rows(block: Block) -> np.ndarray:
     """Mask of the rows of an integer block whose coordinates are exactly (0,0,0)."""
     if block.scale is None or block.offset is None:

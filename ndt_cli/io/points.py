@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ndt_cli.errors import InputError, NdtError, one_line
-from ndt_cli.io.blocks import Block, zero_rows
+from ndt_cli.io.blocks import Block, unusable_integers
 from ndt_cli.io.formats import (
     E57Reader,
     LasReader,
@@ -161,10 +161,8 @@ def record_count(path: str | Path) -> int | None:
 
 
 def _unusable_rows(block: Block) -> tuple[np.ndarray, np.ndarray]:
-    """Masks of a block's non-finite and (0,0,0) rows (integers are always finite)."""
-    if block.scaled:
-        return np.zeros(len(block), bool), zero_rows(block)
-    return unusable(block.values)
+    """Masks of a block's non-finite and (0,0,0) rows."""
+    return unusable_integers(block) if block.scaled else unusable(block.values)
 
 
 def _log_dropped(p: Path, n_read: int, n_nonfinite: int, n_zero: int) -> None:
