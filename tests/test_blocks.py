@@ -127,6 +127,21 @@ def test_e57_is_streamed_in_chunks_with_the_points_pye57_reads(tmp_path):
     np.testing.assert_array_equal(np.concatenate(chunks), _pye57_read(path))
     np.testing.assert_array_equal(e57.read_xyz(path), _pye57_read(path))
     assert io.record_count(path) == len(pts)
+    assert next(e57.iter_blocks(path)).values.dtype == np.float32  # pye57 writes singles
+
+
+@pytest.mark.parametrize(
+    "name, dtype",
+    [("e57_rust/bunnyFloat.e57", np.float32), ("e57_rust/bunnyDouble.e57", np.float64)],
+)
+def test_e57_coordinates_are_held_in_the_precision_the_file_stores(name, dtype):
+    pytest.importorskip("pye57", reason="the e57 extra is not installed")
+    from ndt_cli.io import e57
+
+    path = shared_data("e57_samples") / name
+    blocks = list(e57.iter_blocks(path, 5000))
+    assert {b.values.dtype for b in blocks} == {np.dtype(dtype)}
+    np.testing.assert_array_equal(np.concatenate([b.xyz() for b in blocks]), _pye57_read(path))
 
 
 @pytest.mark.parametrize(

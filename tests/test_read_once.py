@@ -91,6 +91,19 @@ def test_the_slice_pass_on_integers_equals_it_on_their_coordinates():
         np.testing.assert_array_equal(a, b)
 
 
+def test_the_slice_pass_on_single_precision_equals_it_on_their_widening():
+    from ndt_cli.ndt.passes import slice_pass
+
+    rng = np.random.default_rng(12)
+    singles = rng.uniform(-60, 60, (40_000, 3)).astype(np.float32)
+    args = (np.array([0.3, -0.2, -1.5]), np.eye(3), [1.0, 2.0], 0.4, 0.1, None, 50.0)
+    a, b = slice_pass(Block(singles), *args), slice_pass(singles.astype(np.float64), *args)
+    assert a.far == b.far > 0
+    for x, y in zip([*a.slices, *a.grouped], [*b.slices, *b.grouped], strict=True):
+        np.testing.assert_array_equal(x, y)
+    assert sum(len(x) for x in a.slices) > 100
+
+
 # --- a scan held or streamed twice ---------------------------------------------------------
 
 

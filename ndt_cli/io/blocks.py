@@ -1,5 +1,6 @@
 """Coordinates of a chunk of a point file, kept compact: a LAS/LAZ file's integers with its
-scale and offset (12 bytes a point), or float64 (24 bytes a point) for the other formats.
+scale and offset (12 bytes a point), an E57 file's single-precision floats (12 bytes), or
+float64 (24 bytes a point).
 
 A block gives the same float64 coordinates as the readers (:meth:`Block.xyz`): for LAS/LAZ
 ``X * scale + offset`` per axis in float64, as laspy computes them. Holding a scan as blocks
@@ -18,7 +19,8 @@ INT32 = (-(2**31), 2**31 - 1)
 @dataclass(frozen=True)
 class Block:
     """(m,3) coordinates: ``values`` int32 with per-axis ``scale`` and ``offset`` (metres or
-    the file's unit: ``x = X * scale + offset``), or float64 with ``scale`` None."""
+    the file's unit: ``x = X * scale + offset``), or float64 or float32 (a file's single
+    precision, exact) with ``scale`` None."""
 
     values: np.ndarray
     scale: np.ndarray | None = None
@@ -36,9 +38,9 @@ class Block:
         return int(self.values.nbytes)
 
     def xyz(self) -> np.ndarray:
-        """(m,3) float64 coordinates (a new array for integers, ``values`` itself otherwise)."""
+        """(m,3) float64 coordinates (``values`` itself when they are float64)."""
         if self.scale is None or self.offset is None:
-            return self.values
+            return self.values.astype(np.float64, copy=False)
         out = np.empty(self.values.shape, np.float64)
         for k in range(3):
             np.multiply(self.values[:, k], self.scale[k], out=out[:, k])

@@ -279,6 +279,11 @@ class E57Reader(PointReader):
 
         yield from e57.iter_xyz(path, chunk_size or LAS_CHUNK_SIZE)
 
+    def iter_blocks(self, path: Path, chunk_size: int | None = None) -> Iterator[Block]:
+        from ndt_cli.io import e57
+
+        yield from e57.iter_blocks(path, chunk_size or LAS_CHUNK_SIZE)
+
     def read_xyz(self, path: Path) -> np.ndarray:
         from ndt_cli.io import e57
 

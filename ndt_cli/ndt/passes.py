@@ -174,8 +174,10 @@ def slice_pass(
     if block.scaled:
         pts = np.ascontiguousarray(block.values)
         scale, offset = np.asarray(block.scale, np.float64), np.asarray(block.offset, np.float64)
-    else:
-        pts = np.ascontiguousarray(block.values, dtype=np.float64)
+    else:  # float64, or float32 (widened exactly in the loop)
+        pts = np.ascontiguousarray(block.values)
+        if pts.dtype not in (np.float32, np.float64):
+            pts = pts.astype(np.float64)
         scale = offset = np.empty(0)
     n = len(pts)
     bits = np.empty(n, np.int64)  # allocated, touched only where written
