@@ -1,9 +1,10 @@
 """One pass over the points of a chunk (Numba), with plain-numpy twins that the tests compare.
 
-A scan of millions of points is touched twice while it is prepared: once for its bounding box
+A scan of millions of points is touched twice while it is prepared: once for a regular sample
 (numpy), and once to cut the slices (each point's height above the ground model under it) and
-thin the points for ICP, fused into a single loop; everything else works on the much smaller
-results. Coordinates are metres.
+thin the points for ICP, fused into a single loop over each chunk of the scan (float64 or
+float32 coordinates, or a LAS file's integers with their scale and offset); everything else
+works on the much smaller results. Coordinates are metres.
 """
 
 from __future__ import annotations

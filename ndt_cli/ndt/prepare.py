@@ -203,9 +203,10 @@ def prepare_chunks(
 ) -> PreparedScan:
     """Find the frame of a scan (reduction point, vertical, ground) and cut its slices.
 
-    Two passes over the chunks: the first takes a regular sample for the vertical and the
-    ground (:func:`scan_frame`); the second cuts the slices and thins the points for ICP
-    (``icp_voxel`` m, 0: no ICP points). Fewer than ``min_points`` slice points is an error.
+    Two passes over the chunks (held in memory, or read again from the file: see
+    :class:`ScanChunks`): the first takes a regular sample for the vertical and the ground
+    (:func:`scan_frame`); the second cuts the slices and thins the points for ICP (``icp_voxel``
+    m, 0: no ICP points). Fewer than ``min_points`` slice points is an error.
     """
     first = _first_pass(scan, inp or InputConfig())
     frame = scan_frame(first.sample, ground, kernels.surfaces)
@@ -255,7 +256,8 @@ def load_and_prepare_chunks(
 def load_and_prepare(
     scan: str | Path | np.ndarray, cfg: Config, kernels: Kernels = NUMBA
 ) -> PreparedScan:
-    """Read a scan (streamed when large, see :class:`ScanChunks`) and prepare it."""
+    """Read a scan (once, and held while it is prepared unless it is too large: see
+    :class:`ScanChunks`) and prepare it."""
     return load_and_prepare_chunks(ScanChunks.of(scan, cfg.input), cfg, kernels)
 
 
