@@ -3,7 +3,8 @@ PYTHON ?= python3.11
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
-# the runtime dependencies only: where make bench times the commands as fresh processes
+# the runtime dependencies only (with the e57 extra): where make bench times the commands as
+# fresh processes
 RUN_VENV := .venv-run
 
 .PHONY: demo test test-fast bench trust lint sample-data clean
@@ -34,10 +35,10 @@ $(VENV)/.bench: $(STAMP)
 		echo "peers (open3d, small_gicp) not installed: the benchmark says so in their rows"
 	@touch $(VENV)/.bench
 
-$(RUN_VENV)/.installed: pyproject.toml
+$(RUN_VENV)/.installed: pyproject.toml Makefile
 	$(PYTHON) -m venv $(RUN_VENV)
 	$(RUN_VENV)/bin/python -m pip install --quiet --upgrade pip
-	$(RUN_VENV)/bin/python -m pip install --quiet -e .
+	$(RUN_VENV)/bin/python -m pip install --quiet -e ".[e57]"
 	@touch $(RUN_VENV)/.installed
 
 bench: $(VENV)/.bench $(RUN_VENV)/.installed

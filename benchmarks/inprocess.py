@@ -189,17 +189,14 @@ def adjustment(nodes: int = 1000) -> None:
     mean, worst = ab.error_m(plain.poses, truth)
     rows = [["adjust (links without gross errors)", f"{t_adjust:.2f}", f"{plain.iterations} it"]]
     rows[-1] += ["", "", f"{mean * 100:.2f} / {worst * 100:.2f}"]
-    for batch in (False, True):
-        t, res = timed(lambda b=batch: verify(nodes, 0, edges, batch=b))
-        rejected = {k for k, s in enumerate(res.states()) if s is EdgeState.REJECTED}
-        ok = sum(s is NodeStatus.OK for s in res.statuses())
-        mean, worst = ab.error_m(res.poses, truth)
-        label = "verify, " + ("in batches" if batch else "one link at a time (the default)")
-        rows.append([label, f"{t:.2f}", f"{res.solves} solves", f"{len(wrong & rejected)}/"])
-        rows[-1][-1] += f"{len(wrong)}, {len(rejected - wrong)} good"
-        rows[-1] += [f"{ok}/{nodes}", f"{mean * 100:.2f} / {worst * 100:.2f}"]
-        if not batch:
-            target(f"verify a {nodes}-scan network", t, 10.0, "a few seconds", " s")
+    t, res = timed(lambda: verify(nodes, 0, edges))
+    rejected = {k for k, s in enumerate(res.states()) if s is EdgeState.REJECTED}
+    ok = sum(s is NodeStatus.OK for s in res.statuses())
+    mean, worst = ab.error_m(res.poses, truth)
+    rows.append(["verify", f"{t:.2f}", f"{res.solves} solves", f"{len(wrong & rejected)}/"])
+    rows[-1][-1] += f"{len(wrong)}, {len(rejected - wrong)} good"
+    rows[-1] += [f"{ok}/{nodes}", f"{mean * 100:.2f} / {worst * 100:.2f}"]
+    target(f"verify a {nodes}-scan network", t, 10.0, "a few seconds", " s")
     n_untrusted = sum(not e.trusted for e in edges)
     print(f"## Adjustment at scale: {nodes} simulated scans, {len(edges)} links")
     print(f"({len(wrong)} wrong, {n_untrusted} untrusted; benchmarks/adjust_bench.py)\n")

@@ -544,7 +544,7 @@ def test_e57_scans_are_read_by_number_and_header_poses_reported(tmp_path: Path) 
 
 def test_points_are_brought_into_the_configured_scanner_frame(tmp_path):
     from ndt_cli.config import InputConfig
-    from ndt_cli.ndt.prepare import load_points
+    from ndt_cli.ndt.chunks import load_points
 
     # centimetres, x sideways, y up, z forward (a left-handed frame, as 3DTK writes)
     cm = np.array([[100.0, 50.0, 200.0], [0.0, -160.0, 100.0], [3000.0, 0.0, 3000.0]])

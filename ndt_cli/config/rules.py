@@ -21,6 +21,7 @@ RANGES: dict[str, tuple[float | None, float | None]] = {
     "input.min_range": (0.0, 1e5),
     "input.max_range": (1e-3, 1e5),
     "input.chunk_points": (10_000, 1_000_000_000),
+    "input.memory_mb": (0, 1_000_000),
     "ground.z": (-1e7, 1e7),
     "slices.thickness": (1e-3, 10.0),
     "grid.min_points": (3, 10_000),

@@ -48,8 +48,15 @@ class InputConfig:
     )
     chunk_points: int = key(
         4_000_000,
-        "LAS/LAZ files with more points are read twice in chunks of this many points, so memory "
-        "stays bounded whatever the file size; smaller files are read at once",
+        "points read at a time from LAS/LAZ and E57 files (and the stride of a large file's "
+        "ground sample: files with more points take it from their header's count)",
+    )
+    memory_mb: int = key(
+        1000,
+        "a scan whose coordinates take at most this many MB (12 bytes a point in LAZ, 24 in "
+        "E57 and others) is read once and held while it is prepared; a larger LAZ or E57 file "
+        "is read twice, chunk_points at a time, so memory stays bounded whatever its size (a "
+        "LAS file above chunk_points always is: it is mapped, and read again without decoding)",
     )
 
 

@@ -9,9 +9,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ndt_cli.core import neighbours
+from ndt_cli.core.merge import Groups, merge_groups
 from ndt_cli.core.neighbours import CellGrid, NeighbourKernels
 from ndt_cli.core.planes import local_planes, local_planes_numpy
 
+Merge = Callable[[Groups, Groups], Groups]  # merge_groups' type
 Planes = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]  # local_planes' type
 VOXEL_OFFSET = 1 << 20  # voxel indices are packed as 21-bit fields: +-1e6 voxels from origin
 CELLS_PER_VOXEL = 10  # a neighbour grid's cell in voxels of its points: the fastest queries
@@ -51,12 +53,15 @@ class VoxelThinner:
     """One point (the centroid) per ``voxel`` metre cube, accumulated over chunks of points.
 
     The result is ordered by voxel (x index, then y, then z), whatever the chunking. Coordinates
-    must lie within 2**20 voxels of the origin (a reduced frame; 105 km at 0.1 m).
+    must lie within 2**20 voxels of the origin (a reduced frame; 105 km at 0.1 m). Each chunk's
+    voxels are merged into those so far (``merge``: :func:`~ndt_cli.core.merge.merge_groups` or
+    its numpy twin), so memory grows with the voxels, not with the chunks.
     """
 
-    def __init__(self, voxel: float) -> None:
+    def __init__(self, voxel: float, merge: Merge = merge_groups) -> None:
         self.voxel = voxel
-        self._parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self._merge = merge
+        self._groups: Groups | None = None
 
     def add(self, points: np.ndarray) -> None:
         if len(points) == 0:
@@ -66,22 +71,15 @@ class VoxelThinner:
     def add_grouped(self, keys: np.ndarray, sums: np.ndarray, counts: np.ndarray) -> None:
         """Add rows already grouped by voxel key (see :func:`voxel_keys`): coordinate sums
         (n,3) and point counts; a key may repeat."""
-        self._parts.append(_grouped(keys, sums, counts))
-        if len(self._parts) >= 4:  # memory grows with the voxels, not with the chunks
-            self._parts = [self._merged()]
+        part = _grouped(keys, sums, counts)
+        self._groups = part if self._groups is None else self._merge(self._groups, part)
 
     def result(self) -> np.ndarray:
         """(n,3) float64 centroids, one per occupied voxel."""
-        if not self._parts:
+        if self._groups is None:
             return np.empty((0, 3))
-        _, sums, counts = self._merged()
+        _, sums, counts = self._groups
         return sums / counts[:, None]
-
-    def _merged(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        if len(self._parts) == 1:
-            return self._parts[0]
-        keys, sums, counts = (np.concatenate(x) for x in zip(*self._parts, strict=True))
-        return _grouped(keys, sums, counts)
 
 
 def _grouped(

@@ -2,8 +2,10 @@
 
 Every reader tells the point count its header announces (``None`` when the format has no
 header count), and yields the raw coordinates in chunks of at most ``chunk_size`` points:
-LAS/LAZ stream from the file, the other formats come as one chunk. Coordinates are the file's
-own (metres unless the file says otherwise), float64, before any filtering.
+LAS/LAZ and E57 stream from the file, the other formats come as one chunk. Coordinates are the
+file's own (metres unless the file says otherwise), float64, before any filtering; as
+:class:`~ndt_cli.io.blocks.Block` a LAS/LAZ file's chunks keep their integers (12 bytes a
+point instead of 24).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import numpy as np
 import plyfile
 
 from ndt_cli.errors import InputError
+from ndt_cli.io.blocks import Block
 
 logger = logging.getLogger(__name__)
 
@@ -37,9 +40,20 @@ class PointReader:
         """Read what a quick look needs (the header) and raise if the file cannot be used."""
         self.count(path)
 
+    def record_count(self, path: Path) -> int | None:
+        """Point records the header announces, invalid ones included (LAS/LAZ, E57), or None:
+        an upper bound on the points, to budget memory before reading."""
+        return self.count(path)
+
     def iter_xyz(self, path: Path, chunk_size: int | None = None) -> Iterator[np.ndarray]:
         """Raw (m,3) float64 chunks in file order (one chunk unless the format streams)."""
         yield np.asarray(self.read_xyz(path), dtype=np.float64).reshape(-1, 3)
+
+    def iter_blocks(self, path: Path, chunk_size: int | None = None) -> Iterator[Block]:
+        """The chunks of :meth:`iter_xyz` as blocks (float64 unless the format stores
+        integers)."""
+        for xyz in self.iter_xyz(path, chunk_size):
+            yield Block(xyz)
 
     def read_xyz(self, path: Path) -> np.ndarray:
         """All points of ``path`` as raw (N,3) float64, before any filtering."""
@@ -77,22 +91,35 @@ class LasReader(PointReader):
             _warn_extra_records(reader.header, path)
             return int(reader.header.point_count)
 
-    def iter_xyz(self, path: Path, chunk_size: int | None = None) -> Iterator[np.ndarray]:
-        size = chunk_size or LAS_CHUNK_SIZE
+    def record_count(self, path: Path) -> int:
         with laspy.open(path) as reader:
+            return int(reader.header.point_count)
+
+    def iter_xyz(self, path: Path, chunk_size: int | None = None) -> Iterator[np.ndarray]:
+        for block in self.iter_blocks(path, chunk_size):
+            yield block.xyz()
+
+    def iter_blocks(self, path: Path, chunk_size: int | None = None) -> Iterator[Block]:
+        """The X, Y, Z integers with the header's scales and offsets, ``chunk_size`` points at
+        a time: an uncompressed file mapped chunk by chunk, a LAZ file decompressed once, on
+        every core, and only its x, y and z (where its point format allows)."""
+        size = chunk_size or LAS_CHUNK_SIZE
+        with laspy.open(path, laz_backend=LAZ_BACKEND, decompression_selection=XYZ) as reader:
             header = reader.header
+            scale = np.array(header.scales, np.float64)
+            offset = np.array(header.offsets, np.float64)
             if not header.are_points_compressed:
                 _check_las_size(header, path)
                 n = int(header.point_count)
                 for start in range(0, n, size):  # a mapping per chunk: memory stays bounded
                     records = _records(path, header, start, min(size, n - start))
-                    yield _scaled_records(records, header, np.empty((len(records), 3)))
+                    yield Block(_integers(records), scale, offset)
                 return
             for chunk in _las_chunks(reader, path, size):
-                yield _scaled_xyz(chunk, np.empty((len(chunk), 3), dtype=np.float64))
+                yield Block(_integers(chunk.array), scale, offset)
 
     def read_xyz(self, path: Path) -> np.ndarray:
-        with laspy.open(path) as reader:
+        with laspy.open(path, laz_backend=LAZ_BACKEND, decompression_selection=XYZ) as reader:
             header = reader.header
             if header.are_points_compressed:  # a LAZ file's size does not vouch for its count
                 chunks = _las_chunks(reader, path, LAS_CHUNK_SIZE)
@@ -101,6 +128,20 @@ class LasReader(PointReader):
             _check_las_size(header, path)  # before mapping what the header announces
             n = int(header.point_count)
             return _scaled_records(_records(path, header, 0, n), header, np.empty((n, 3)))
+
+
+LAZ_BACKEND = laspy.LazBackend.LazrsParallel  # lazrs decompresses a file's chunks on every core
+XYZ = laspy.DecompressionSelection.xy_returns_channel() | laspy.DecompressionSelection.Z
+"""The layers a LAZ file of point format 6 to 10 decompresses for the registration: x and y
+(stored with the returns and the channel), and z; the other formats store points whole."""
+
+
+def _integers(records: np.ndarray) -> np.ndarray:
+    """(m,3) int32 X, Y, Z of LAS point records."""
+    out = np.empty((len(records), 3), np.int32)
+    for k, name in enumerate("XYZ"):
+        out[:, k] = records[name]
+    return out
 
 
 SCALE_BLOCK = 65_536  # records scaled at a time: the block's columns stay in the CPU's cache
@@ -227,6 +268,21 @@ class E57Reader(PointReader):
         from ndt_cli.io import e57
 
         e57.check_scan(path)
+
+    def record_count(self, path: Path) -> int:
+        from ndt_cli.io import e57
+
+        return e57.record_count(path)
+
+    def iter_xyz(self, path: Path, chunk_size: int | None = None) -> Iterator[np.ndarray]:
+        from ndt_cli.io import e57
+
+        yield from e57.iter_xyz(path, chunk_size or LAS_CHUNK_SIZE)
+
+    def iter_blocks(self, path: Path, chunk_size: int | None = None) -> Iterator[Block]:
+        from ndt_cli.io import e57
+
+        yield from e57.iter_blocks(path, chunk_size or LAS_CHUNK_SIZE)
 
     def read_xyz(self, path: Path) -> np.ndarray:
         from ndt_cli.io import e57

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ndt_cli.errors import InputError, NdtError, one_line
+from ndt_cli.io.blocks import Block, unusable_integers
 from ndt_cli.io.formats import (
     E57Reader,
     LasReader,
@@ -151,24 +152,65 @@ def count(path: str | Path) -> int | None:
         return reader.count(p)
 
 
-def read_chunks(path: str | Path, chunk_size: int | None = None) -> Iterator[np.ndarray]:
-    """The usable points of a file as (m,3) float64 chunks in file order: LAS/LAZ are streamed
-    ``chunk_size`` points at a time (memory stays bounded), other formats come as one chunk.
-    Non-finite and (0,0,0) points are dropped; errors as in :func:`read`."""
+def record_count(path: str | Path) -> int | None:
+    """Point records a file's header announces, invalid ones included (LAS/LAZ, E57), or None
+    for formats without a count: an upper bound on its points, to budget memory."""
     p, reader = _open(path)
-    n_read = n_kept = 0
     with file_errors(p):
-        for raw in reader.iter_xyz(p, chunk_size):
-            nonfinite, zero = unusable(raw)
-            keep = ~(nonfinite | zero)
+        return reader.record_count(p)
+
+
+def _unusable_rows(block: Block) -> tuple[np.ndarray, np.ndarray]:
+    """Masks of a block's non-finite and (0,0,0) rows."""
+    return unusable_integers(block) if block.scaled else unusable(block.values)
+
+
+def _log_dropped(p: Path, n_read: int, n_nonfinite: int, n_zero: int) -> None:
+    logger.log(
+        logging.INFO if n_nonfinite or n_zero else logging.DEBUG,
+        "%s: read %d points, dropped %d non-finite and %d (0,0,0) points",
+        p,
+        n_read,
+        n_nonfinite,
+        n_zero,
+    )
+
+
+def _no_usable(p: Path, n_read: int, n_nonfinite: int, n_zero: int) -> InputError:
+    return InputError(
+        f"no usable points: of {n_read}, {n_nonfinite} are NaN/inf and {n_zero} are (0,0,0)", p
+    )
+
+
+def read_blocks(path: str | Path, chunk_size: int | None = None) -> Iterator[Block]:
+    """The usable points of a file as :class:`~ndt_cli.io.blocks.Block` in file order: LAS/LAZ
+    (their integers) and E57 are streamed ``chunk_size`` points at a time (memory stays
+    bounded), other formats come as one chunk. Non-finite and (0,0,0) points are dropped and
+    counted in the log; errors as in :func:`read`."""
+    p, reader = _open(path)
+    n_read = n_nonfinite = n_zero = 0
+    with file_errors(p):
+        for raw in reader.iter_blocks(p, chunk_size):
+            nonfinite, zero = _unusable_rows(raw)
+            drop = nonfinite | zero
+            n_drop = int(drop.sum())
             n_read += len(raw)
-            n_kept += int(keep.sum())
-            if keep.any():
-                yield raw if keep.all() else raw[keep]
+            n_nonfinite += int(nonfinite.sum())
+            n_zero += int(zero.sum())
+            if n_drop < len(raw):
+                yield raw if n_drop == 0 else raw.rows(~drop)
     if n_read == 0:
         raise InputError("no points in file", p)
-    if n_kept == 0:
-        raise InputError(f"no usable points: all {n_read} are NaN/inf or (0,0,0)", p)
+    if n_nonfinite + n_zero == n_read:
+        raise _no_usable(p, n_read, n_nonfinite, n_zero)
+    _log_dropped(p, n_read, n_nonfinite, n_zero)
+
+
+def read_chunks(path: str | Path, chunk_size: int | None = None) -> Iterator[np.ndarray]:
+    """The usable points of a file as (m,3) float64 chunks in file order (the blocks of
+    :func:`read_blocks` as coordinates)."""
+    for block in read_blocks(path, chunk_size):
+        yield block.xyz()
 
 
 def read(path: str | Path) -> PointCloud:
@@ -186,16 +228,7 @@ def read(path: str | Path) -> PointCloud:
     keep = ~(nonfinite | zero)
     n_nonfinite, n_zero = int(nonfinite.sum()), int(zero.sum())
     if not keep.any():
-        raise InputError(
-            f"no usable points: of {n_read}, {n_nonfinite} are NaN/inf and {n_zero} are (0,0,0)", p
-        )
-    logger.log(
-        logging.INFO if n_nonfinite or n_zero else logging.DEBUG,
-        "%s: read %d points, dropped %d non-finite and %d (0,0,0) points",
-        p,
-        n_read,
-        n_nonfinite,
-        n_zero,
-    )
+        raise _no_usable(p, n_read, n_nonfinite, n_zero)
+    _log_dropped(p, n_read, n_nonfinite, n_zero)
     points = raw if keep.all() else raw[keep]
     return PointCloud(np.ascontiguousarray(points), p, n_read, n_nonfinite, n_zero)

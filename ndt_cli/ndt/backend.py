@@ -12,7 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ndt_cli.core.geometry import SURFACES, SURFACES_NUMPY, Surfaces
+from ndt_cli.core import merge
+from ndt_cli.core.geometry import SURFACES, SURFACES_NUMPY, Merge, Surfaces
 from ndt_cli.ndt import bnb_kernels, kernels, passes
 from ndt_cli.ndt.bnb_kernels import SearchKernels
 from ndt_cli.ndt.grid import NDTMap
@@ -29,6 +30,7 @@ class Kernels:
     slice_pass: Callable[..., tuple]
     search: SearchKernels  # the branch and bound of the global search
     surfaces: Surfaces  # neighbours, normals and planarity in 3D (levelling, ICP)
+    merge_groups: Merge  # a scan's ICP voxels merged chunk by chunk
 
     def __repr__(self) -> str:
         return f"Kernels({self.name})"
@@ -41,6 +43,7 @@ NUMBA = Kernels(
     passes.slice_pass,
     bnb_kernels.NUMBA,
     SURFACES,
+    merge.merge_groups,
 )
 NUMPY = Kernels(
     "numpy",
@@ -49,4 +52,5 @@ NUMPY = Kernels(
     passes.slice_pass_numpy,
     bnb_kernels.NUMPY,
     SURFACES_NUMPY,
+    merge.merge_groups_numpy,
 )

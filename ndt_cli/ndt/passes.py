@@ -1,9 +1,10 @@
 """One pass over the points of a chunk (Numba), with plain-numpy twins that the tests compare.
 
-A scan of millions of points is touched twice while it is prepared: once for its bounding box
+A scan of millions of points is touched twice while it is prepared: once for a regular sample
 (numpy), and once to cut the slices (each point's height above the ground model under it) and
-thin the points for ICP, fused into a single loop; everything else works on the much smaller
-results. Coordinates are metres.
+thin the points for ICP, fused into a single loop over each chunk of the scan (float64 or
+float32 coordinates, or a LAS file's integers with their scale and offset); everything else
+works on the much smaller results. Coordinates are metres.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import numpy as np
 from ndt_cli.core.arrays import column_bounds
 from ndt_cli.core.geometry import VOXEL_OFFSET as _OFFSET
 from ndt_cli.core.geometry import voxel_keys
+from ndt_cli.io.blocks import Block
 from ndt_cli.ndt.slicing import cut_slices
 from ndt_cli.ndt.terrain import Terrain
 
@@ -37,10 +39,29 @@ _GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # Fibonacci hashing: 2**64 / golden rat
 
 @numba.njit(cache=True, nogil=True)
 def _slice_pass(
-    points, reduction, level, heights, half, voxel, ground, frame, mask, xy, keys, sums, counts
+    points,
+    scale,
+    offset,
+    reduction,
+    level,
+    heights,
+    half,
+    voxel,
+    ground,
+    frame,
+    bits_out,
+    xy,
+    keys,
+    sums,
+    counts,
 ):  # pragma: no cover - compiled
+    # points: float64, or LAS integers when scale holds 3 values (x = X * scale + offset)
     # frame: ground grid origin x, y, 1 / cell, and the largest squared distance kept (m^2)
+    # the points in any slice are written one after the other (bits_out, xy), as the grouped
+    # voxels (keys, sums, counts): only the rows written are touched, so memory grows with them
+    scaled = scale.shape[0] == 3
     m = -1
+    hit = 0
     recent_key = np.zeros(1 << RECENT_BITS, np.int64)  # a small direct-mapped table of the
     recent_row = np.full(1 << RECENT_BITS, -1, np.int64)  # voxels seen last and their rows
     shift = np.uint64(64 - RECENT_BITS)
@@ -48,10 +69,15 @@ def _slice_pass(
     far = 0
     nx, ny = ground.shape
     for i in range(points.shape[0]):
-        x = points[i, 0] - reduction[0]
-        y = points[i, 1] - reduction[1]
-        z = points[i, 2] - reduction[2]
-        mask[i] = 0
+        if scaled:
+            px = points[i, 0] * scale[0] + offset[0]
+            py = points[i, 1] * scale[1] + offset[1]
+            pz = points[i, 2] * scale[2] + offset[2]
+        else:
+            px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+        x = px - reduction[0]
+        y = py - reduction[1]
+        z = pz - reduction[2]
         if x * x + y * y + z * z > frame[3]:
             far += 1
             continue
@@ -65,10 +91,11 @@ def _slice_pass(
         for k in range(heights.shape[0]):
             if abs(hz - heights[k]) <= half:
                 bits |= np.int64(1) << k
-        mask[i] = bits
         if bits != 0:
-            xy[i, 0] = lx
-            xy[i, 1] = ly
+            bits_out[hit] = bits
+            xy[hit, 0] = lx
+            xy[hit, 1] = ly
+            hit += 1
         if voxel > 0.0:
             ix = np.int64(np.floor(x / voxel)) + _OFFSET
             iy = np.int64(np.floor(y / voxel)) + _OFFSET
@@ -92,7 +119,7 @@ def _slice_pass(
             sums[row, 1] += y
             sums[row, 2] += z
             counts[row] += 1.0
-    return m + 1, inside, far
+    return m + 1, hit, inside, far
 
 
 @dataclass(frozen=True)
@@ -113,8 +140,12 @@ def _frame(terrain: Terrain | None, max_range: float) -> tuple[np.ndarray, np.nd
     return np.ascontiguousarray(terrain.heights, np.float64), frame
 
 
+def _block(points: np.ndarray | Block) -> Block:
+    return points if isinstance(points, Block) else Block(points)
+
+
 def slice_pass(
-    points: np.ndarray,
+    points: np.ndarray | Block,
     reduction: np.ndarray,
     level: np.ndarray,
     heights: Sequence[float],
@@ -124,6 +155,9 @@ def slice_pass(
     max_range: float = np.inf,
 ) -> Cut:
     """Cut the slices of one chunk and group its points by ICP voxel, in one pass.
+
+    ``points``: (n,3) float64 metres, or a :class:`~ndt_cli.io.blocks.Block` (a LAS file's
+    integers are scaled in the loop, to the coordinates :meth:`Block.xyz` gives).
 
     A point's height is taken above ``terrain`` (the ground under it; default: the plane
     z = 0) in the reduced, levelled frame ``L (p - reduction)``; slice k holds the points within
@@ -137,15 +171,25 @@ def slice_pass(
     """
     if len(heights) > MAX_SLICES:
         raise ValueError(f"at most {MAX_SLICES} slices")
-    pts = np.ascontiguousarray(points, dtype=np.float64)
+    block = _block(points)
+    if block.scaled:
+        pts = np.ascontiguousarray(block.values)
+        scale, offset = np.asarray(block.scale, np.float64), np.asarray(block.offset, np.float64)
+    else:  # float64, or float32 (widened exactly in the loop)
+        pts = np.ascontiguousarray(block.values)
+        if pts.dtype not in (np.float32, np.float64):
+            pts = pts.astype(np.float64)
+        scale = offset = np.empty(0)
     n = len(pts)
-    mask = np.empty(n, np.int64)
+    bits = np.empty(n, np.int64)  # allocated, touched only where written
     xy = np.empty((n, 2))
     m_max = n if voxel > 0 else 0
     keys, sums, counts = np.empty(m_max, np.int64), np.empty((m_max, 3)), np.empty(m_max)
     ground, frame = _frame(terrain, max_range)
-    m, inside, far = _slice_pass(
+    m, hits, inside, far = _slice_pass(
         pts,
+        scale,
+        offset,
         np.asarray(reduction, np.float64),
         np.ascontiguousarray(level, np.float64),
         np.asarray(heights, np.float64),
@@ -153,7 +197,7 @@ def slice_pass(
         float(voxel),
         ground,
         frame,
-        mask,
+        bits,
         xy,
         keys,
         sums,
@@ -161,15 +205,14 @@ def slice_pass(
     )
     if not inside:
         raise ValueError("points too far from the origin for voxel thinning")
-    hit = np.flatnonzero(mask)  # the few points in any slice, then per slice
-    sub_mask, sub_xy = mask[hit], xy[hit]
-    slices = [np.ascontiguousarray(sub_xy[(sub_mask >> k) & 1 == 1]) for k in range(len(heights))]
+    bits, xy = bits[:hits], xy[:hits]  # the few points in any slice, then per slice
+    slices = [np.ascontiguousarray(xy[(bits >> k) & 1 == 1]) for k in range(len(heights))]
     grouped = (keys[:m], sums[:m], counts[:m]) if voxel > 0 else None
     return Cut(slices, grouped, int(far))
 
 
 def slice_pass_numpy(
-    points: np.ndarray,
+    points: np.ndarray | Block,
     reduction: np.ndarray,
     level: np.ndarray,
     heights: Sequence[float],
@@ -179,7 +222,7 @@ def slice_pass_numpy(
     max_range: float = np.inf,
 ) -> Cut:
     """Plain-numpy twin of :func:`slice_pass` (one row per point in the grouping)."""
-    rel = points - reduction
+    rel = _block(points).xyz() - reduction
     near = np.einsum("ij,ij->i", rel, rel) <= max_range * max_range
     rel = rel[near]
     lev = rel @ np.asarray(level).T

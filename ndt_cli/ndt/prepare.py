@@ -13,19 +13,19 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 
-from ndt_cli.config.rules import axes_matrix
 from ndt_cli.config.schema import Config, GroundConfig, InputConfig, SlicesConfig
 from ndt_cli.core.geometry import SURFACES, Surfaces, VoxelThinner
 from ndt_cli.core.transforms import levelling_rotation, rotation4, translation
 from ndt_cli.errors import InputError
+from ndt_cli.io.blocks import Block
 from ndt_cli.ndt.backend import NUMBA, Kernels
+from ndt_cli.ndt.chunks import HELD_SUFFIXES, ScanChunks, no_points_in_range
 from ndt_cli.ndt.slicing import GROUND_SAMPLE
 from ndt_cli.ndt.terrain import REACH, Terrain, terrain_of
 from ndt_cli.ndt.vertical import Patches, Vertical, vertical_of
@@ -87,96 +87,6 @@ class PreparedScan:
         return xyz @ T[:3, :3].T + T[:3, 3]
 
 
-def _in_frame(points: np.ndarray, inp: InputConfig) -> np.ndarray:
-    """``input.axes``, ``input.scale`` and the range limits applied to (N,3) file points."""
-    if inp.axes.replace(" ", "") != "x,y,z" or inp.scale != 1.0:
-        points = points @ (inp.scale * axes_matrix(inp.axes)).T
-    if inp.max_range is not None or inp.min_range > 0:
-        r2 = np.einsum("ij,ij->i", points, points)
-        keep = r2 >= inp.min_range**2
-        if inp.max_range is not None:
-            keep &= r2 <= inp.max_range**2
-        points = points[keep]
-    return np.ascontiguousarray(points)
-
-
-def _no_points_in_range(inp: InputConfig, path: Path | None) -> InputError:
-    return InputError(
-        f"no point between input.min_range and input.max_range "
-        f"({inp.min_range} to {inp.max_range} m from the scanner)",
-        path,
-    )
-
-
-def to_scanner_frame(points: np.ndarray, inp: InputConfig, path: Path | None = None) -> np.ndarray:
-    """Apply ``input.axes``, ``input.scale`` and the range limits to (N,3) file points."""
-    out = _in_frame(points, inp)
-    if len(out) == 0:
-        raise _no_points_in_range(inp, path)
-    return out
-
-
-def usable_array(scan: object) -> np.ndarray:
-    """The finite, non-(0,0,0) rows of an (N,3) array the user passed (see ``io.as_points``)."""
-    from ndt_cli.io import as_points, unusable
-
-    pts = as_points(scan)
-    nonfinite, zero = unusable(pts)
-    drop = nonfinite | zero
-    if drop.all():
-        raise InputError("the array holds no usable points")
-    if drop.any():
-        log.info("dropped %d non-finite or (0,0,0) points", int(drop.sum()))
-        pts = pts[~drop]
-    return pts
-
-
-def load_points(
-    scan: str | Path | np.ndarray, inp: InputConfig | None = None
-) -> tuple[np.ndarray, Path | None]:
-    """(N,3) float64 points of a file path or an array in the scanner frame (metres, z up; see
-    :class:`~ndt_cli.config.InputConfig`). Non-finite and (0,0,0) points are dropped."""
-    inp = inp or InputConfig()
-    if isinstance(scan, str | Path):
-        from ndt_cli import io
-
-        cloud = io.read(scan)
-        return to_scanner_frame(cloud.points, inp, cloud.path), cloud.path
-    return to_scanner_frame(usable_array(scan), inp), None
-
-
-@dataclass(frozen=True)
-class ScanChunks:
-    """A scan as a re-iterable sequence of (m,3) float64 chunks in the scanner frame.
-
-    Files with more than ``input.chunk_points`` points (LAS/LAZ) are streamed and read twice, so
-    memory grows with the chunk and the points kept, not with the file; smaller files and arrays
-    are one chunk held in memory.
-    """
-
-    chunks: Callable[[], Iterable[np.ndarray]]
-    n_points: int  # points announced (the file's count before dropping unusable ones)
-    path: Path | None
-
-    @classmethod
-    def of(cls, scan: str | Path | np.ndarray, inp: InputConfig) -> ScanChunks:
-        if not isinstance(scan, str | Path):
-            pts = to_scanner_frame(usable_array(scan), inp)
-            return cls(lambda: (pts,), len(pts), None)
-        from ndt_cli import io
-
-        path = Path(scan)
-        n = io.count(path)
-        if n is not None and n > inp.chunk_points:
-            return cls(
-                lambda: (_in_frame(c, inp) for c in io.read_chunks(path, inp.chunk_points)),
-                n,
-                path,
-            )
-        pts, _ = load_points(path, inp)
-        return cls(lambda: (pts,), len(pts), path)
-
-
 @dataclass(frozen=True)
 class _FirstPass:
     sample: np.ndarray  # regular-stride sample of at most GROUND_SAMPLE points, scanner frame
@@ -190,10 +100,10 @@ def _first_pass(scan: ScanChunks, inp: InputConfig) -> _FirstPass:
     for c in scan.chunks():
         if len(c) == 0:
             continue
-        parts.append(c[(-seen) % stride :: stride])
+        parts.append(c.rows(slice((-seen) % stride, None, stride)).xyz())
         seen += len(c)
     if seen == 0:
-        raise _no_points_in_range(inp, scan.path)
+        raise no_points_in_range(inp, scan.path)
     return _FirstPass(np.concatenate(parts), seen)
 
 
@@ -255,7 +165,7 @@ def _second_pass(
     ``icp_voxel`` > 0, the points thinned to one per ``icp_voxel`` cube (reduced frame, not
     levelled). Stray points (see :class:`ScanFrame`) are left out and counted in the log."""
     parts: list[list[np.ndarray]] = [[] for _ in slices.heights]
-    thinner = VoxelThinner(icp_voxel) if icp_voxel > 0 else None
+    thinner = VoxelThinner(icp_voxel, kernels.merge_groups) if icp_voxel > 0 else None
     far = 0
     for c in scan.chunks():
         try:
@@ -294,9 +204,10 @@ def prepare_chunks(
 ) -> PreparedScan:
     """Find the frame of a scan (reduction point, vertical, ground) and cut its slices.
 
-    Two passes over the chunks: the first takes a regular sample for the vertical and the
-    ground (:func:`scan_frame`); the second cuts the slices and thins the points for ICP
-    (``icp_voxel`` m, 0: no ICP points). Fewer than ``min_points`` slice points is an error.
+    Two passes over the chunks (held in memory, or read again from the file: see
+    :class:`ScanChunks`): the first takes a regular sample for the vertical and the ground
+    (:func:`scan_frame`); the second cuts the slices and thins the points for ICP (``icp_voxel``
+    m, 0: no ICP points). Fewer than ``min_points`` slice points is an error.
     """
     first = _first_pass(scan, inp or InputConfig())
     frame = scan_frame(first.sample, ground, kernels.surfaces)
@@ -324,7 +235,7 @@ def prepare_chunks(
 
 def prepare(points: np.ndarray, cfg: Config, path: Path | None = None) -> PreparedScan:
     """:func:`prepare_chunks` of a scan held in memory, with the settings of ``cfg``."""
-    return load_and_prepare_chunks(ScanChunks(lambda: (points,), len(points), path), cfg)
+    return load_and_prepare_chunks(ScanChunks.held_points(points, path), cfg)
 
 
 def load_and_prepare_chunks(
@@ -346,17 +257,21 @@ def load_and_prepare_chunks(
 def load_and_prepare(
     scan: str | Path | np.ndarray, cfg: Config, kernels: Kernels = NUMBA
 ) -> PreparedScan:
-    """Read a scan (streamed when large, see :class:`ScanChunks`) and prepare it."""
+    """Read a scan (once, and held while it is prepared unless it is too large: see
+    :class:`ScanChunks`) and prepare it."""
     return load_and_prepare_chunks(ScanChunks.of(scan, cfg.input), cfg, kernels)
 
 
-def _load_runtime(kernels: Kernels) -> None:
+def _load_runtime(kernels: Kernels, integers: bool) -> None:
     """Load what preparing a scan needs once per process: Numba's runtime (its first call of a
-    cached kernel takes about a fifth of a second, almost all of it holding the GIL). Run in a
+    cached kernel takes about a fifth of a second, almost all of it holding the GIL) and the
+    slice pass for the scan's coordinates (a LAS file's ``integers`` or float64). Run in a
     helper thread while the files are read, it overlaps the reads, which spend their time in
     the disk and in numpy. A failure here is left to the real call to report."""
+    one = np.ones(3)
+    block = Block(np.zeros((1, 3), np.int32), one, one) if integers else Block(np.zeros((1, 3)))
     try:
-        kernels.slice_pass(np.zeros((1, 3)), np.zeros(3), np.eye(3), [0.0], 0.1, 0.1, None, 1.0)
+        kernels.slice_pass(block, np.zeros(3), np.eye(3), [0.0], 0.1, 0.1, None, 1.0)
     except Exception:  # the same call fails again where its error is reported
         return
 
@@ -374,7 +289,10 @@ def load_and_prepare_pair(
     The scans are independent: the results are those of two calls in turn. The target's error,
     if any, is the one raised. The helper is a daemon: Ctrl-C is not held up until it ends."""
     done: dict[str, PreparedScan | BaseException] = {}
-    loader = threading.Thread(target=_load_runtime, args=(kernels,), name="runtime", daemon=True)
+    integers = isinstance(target, str | Path) and Path(target).suffix.lower() in HELD_SUFFIXES
+    loader = threading.Thread(
+        target=_load_runtime, args=(kernels, integers), name="runtime", daemon=True
+    )
     loader.start()
 
     def prepare_source() -> None:
