@@ -8,13 +8,14 @@ import csv
 import json
 from pathlib import Path
 
+import laspy
 import numpy as np
 import pytest
 from conftest import street_files
 from typer.testing import CliRunner
 
 from ndt_cli import io, sim
-from ndt_cli.cli import chain_app
+from ndt_cli.cli import chain_app, export_app
 from ndt_cli.config import Config
 from ndt_cli.core.transforms import transform_errors
 from ndt_cli.errors import ConfigError, InputError
@@ -179,6 +180,23 @@ def test_two_campaigns_in_one_call_keep_apart(tmp_path):
         row = rows[f"{both.names[k]}.laz"]
         T = np.array([float(row[f"m{i}{j}"]) for i in range(4) for j in range(4)]).reshape(4, 4)
         assert _right(T, first @ both.poses[k]), both.names[k]
+    # poses_cluster1.txt gives them as poses.txt gives cluster 0's
+    cluster1 = read_pose_list(out / "poses_cluster1.txt")
+    assert set(cluster1) == {f"{both.names[k]}.laz" for k in other}
+    for k in other:
+        assert _right(cluster1[f"{both.names[k]}.laz"], first @ both.poses[k]), both.names[k]
+    # ndt-export --cluster 1: the other site's points, where they are relative to its first scan
+    res = runner.invoke(export_app, [str(out), "--out", str(tmp_path / "1.laz"), "--cluster", "1"])
+    assert res.exit_code == 0, res.output
+    cloud = laspy.read(tmp_path / "1.laz")
+    xyz, index = np.column_stack([cloud.x, cloud.y, cloud.z]), np.asarray(cloud.scan_index)
+    assert set(index) == set(other)
+    for k in other:
+        truth = both.scans[k] @ (first @ both.poses[k])[:3, :3].T + (first @ both.poses[k])[:3, 3]
+        d = np.linalg.norm(xyz[index == k] - truth, axis=1)
+        assert np.percentile(d, 99) < TRANS, (k, np.percentile(d, 99))
+    res = runner.invoke(export_app, [str(out), "--out", str(tmp_path / "2.laz"), "--cluster", "2"])
+    assert res.exit_code == 2 and "--cluster 2" in res.output
 
 
 @pytest.mark.slow

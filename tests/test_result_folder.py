@@ -63,7 +63,7 @@ def test_statuses_are_read_as_the_network_s_enums(tmp_path):
         NodeStatus.UNPOSED,
         NodeStatus.OK,
     ]
-    assert [s.other_cluster for s in scans] == [None, None, None, "1"]
+    assert [s.cluster for s in scans] == [0, 0, 0, 1]
     assert not any(s.hash_recorded for s in scans)
 
 
@@ -74,10 +74,26 @@ def test_only_ok_scans_of_the_anchor_s_cluster_are_exported_and_the_others_say_w
     assert left == [
         "b.laz: suspect: reached only through an unchecked link (--include-suspect exports it)",
         "c.laz: unposed: no usable link",
-        "d.laz: other cluster: cluster 1: not tied to the anchor",
+        "d.laz: in cluster 1, not 0 (--cluster)",
     ]
     assert select(scans, None, include_suspect=True)[0] == [0, 1]
     assert select(scans, ["d.laz", "0"], include_suspect=True)[0] == [0]
+
+
+def test_another_cluster_is_exported_when_named_and_a_cluster_that_is_not_is_refused(tmp_path):
+    scans, _ = result_scans(_chain_folder(tmp_path, STREET, None))
+    keep, left = select(scans, None, include_suspect=True, cluster=1)
+    assert keep == [3]
+    assert left[0] == "a.laz: in cluster 0, not 1 (--cluster)"
+    assert left[2] == "c.laz: unposed: no usable link"
+    with pytest.raises(InputError, match=r"--cluster 2: .* \(it has 0, 1\)"):
+        select(scans, None, include_suspect=False, cluster=2)
+
+
+def test_a_cluster_that_is_not_a_number_is_refused(tmp_path):
+    rows = [_row(0, "a.laz", "ok"), _row(1, "b.laz", "ok", cluster="one")]
+    with pytest.raises(InputError, match="cluster 'one' is not a cluster number"):
+        result_scans(_chain_folder(tmp_path, rows, None))
 
 
 def test_a_status_that_no_run_writes_is_refused(tmp_path):

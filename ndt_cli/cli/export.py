@@ -6,7 +6,7 @@ import logging
 import os
 from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, NamedTuple
 
 import typer
 
@@ -37,7 +37,9 @@ _HELP = "\n\n".join(
         "extra bytes); each point records its scan in the extra dimension scan_index; the "
         "anchor scan's coordinate system (WKT or GeoTIFF keys) is copied; coordinates are "
         "stored to the millimetre. Suspect scans are left out unless --include-suspect; "
-        "unposed scans always.",
+        "unposed scans always. A campaign that the network split exports its anchor's "
+        "cluster (0), or the cluster --cluster names, in the frame of that cluster's first "
+        "scan.",
         "Exit codes: 0 written; 2 bad input (not a result folder, a scan file missing) or an "
         "output that cannot be written; 130 stopped by Ctrl-C.",
         "Examples:\n\n"
@@ -71,6 +73,10 @@ def export_cmd(
     include_suspect: Annotated[
         bool, typer.Option("--include-suspect", help="Export suspect scans too.")
     ] = False,
+    cluster: Annotated[
+        int,
+        typer.Option(min=0, help="Export this cluster of scans (0: the anchor's; see poses.csv)."),
+    ] = 0,
     json_out: JsonOpt = False,
     quiet: QuietOpt = False,
     debug: DebugOpt = False,
@@ -80,7 +86,8 @@ def export_cmd(
     with user_errors("ndt-export", debug):
         target, per_scan_dir = _targets(result_dir, out, per_scan, fmt, voxel)
         assert result_dir is not None
-        written = _run(result_dir, target, per_scan_dir, voxel, scans, include_suspect, quiet)
+        chosen = _Choice(scans, include_suspect, cluster)
+        written = _run(result_dir, target, per_scan_dir, voxel, chosen, quiet)
     if json_out:
         from ndt_cli.io.serialize import to_json
 
@@ -140,8 +147,7 @@ def _run(
     target: Path,
     per_scan: Path | None,
     voxel: float | None,
-    names: str | None,
-    include_suspect: bool,
+    choice: _Choice,
     quiet: bool,
 ) -> dict:
     """Export the selected scans of the result; what was written, as a JSON-ready dict."""
@@ -152,9 +158,10 @@ def _run(
 
     scans, anchor = result_folder.result_scans(folder)
     cfg = result_folder.result_config(folder)
-    crs = result_folder.result_crs(folder)
-    chosen_names = None if names is None else names.split(",")
-    keep, left = result_folder.select(scans, chosen_names, include_suspect)
+    # another cluster is in its first scan's frame, not the control's: its header's CRS
+    crs = result_folder.result_crs(folder) if choice.cluster == 0 else None
+    names = None if choice.names is None else choice.names.split(",")
+    keep, left = result_folder.select(scans, names, choice.include_suspect, choice.cluster)
     for line in left:
         log.warning("left out %s", line)
     if not keep:
@@ -183,6 +190,14 @@ def _run(
         "points_dropped": res.points_dropped,
         "point_format": res.point_format,
     }
+
+
+class _Choice(NamedTuple):
+    """Which scans of the result to export: ``--scans``, ``--include-suspect``, ``--cluster``."""
+
+    names: str | None
+    include_suspect: bool
+    cluster: int
 
 
 class _Bar:

@@ -55,7 +55,8 @@ _SUSPECT = {NodeStatus.SUSPECT, Status.SUSPECT}
 class ResultScan:
     """A scan of a result: its name, file, status (a chain's :class:`NodeStatus`; a pair's
     :class:`Status` of its registration), T_world_scan (None when unposed), reason, the
-    cluster it is posed in when not the anchor's (None in the anchor's), and the SHA-256 of
+    cluster it is posed in (0: the anchor's; another's poses are in the frame of that
+    cluster's first scan), and the SHA-256 of
     its file when registered (None when it could not be read then; ``hash_recorded``: whether
     the result records it at all: older results do not)."""
 
@@ -64,20 +65,24 @@ class ResultScan:
     status: NodeStatus | Status
     T_world_scan: np.ndarray | None
     reason: str = ""
-    other_cluster: str | None = None
+    cluster: int = 0
     sha256: str | None = None
     hash_recorded: bool = False
 
-    @property
-    def shown(self) -> str:
-        """The status as the export names it ('other cluster' outside the anchor's)."""
-        return self.status.value if self.other_cluster is None else "other cluster"
-
-    def exportable(self, include_suspect: bool) -> bool:
-        """Posed in the anchor's frame, ok (or suspect, when ``include_suspect``)."""
+    def exportable(self, include_suspect: bool, cluster: int = 0) -> bool:
+        """Posed in the frame of ``cluster``, ok (or suspect, when ``include_suspect``)."""
         allowed = _OK | _SUSPECT if include_suspect else _OK
-        posed = self.T_world_scan is not None and self.other_cluster is None
+        posed = self.T_world_scan is not None and self.cluster == cluster
         return posed and self.status in allowed
+
+    def why_left_out(self, include_suspect: bool, cluster: int) -> str:
+        """Why an export of ``cluster`` leaves this scan out (one line)."""
+        if self.T_world_scan is not None and self.cluster != cluster:
+            return f"{self.name}: in cluster {self.cluster}, not {cluster} (--cluster)"
+        hint = ""
+        if self.status in _SUSPECT and not include_suspect:
+            hint = " (--include-suspect exports it)"
+        return f"{self.name}: {self.status.value}{': ' + self.reason if self.reason else ''}{hint}"
 
 
 def _file(path: str) -> Path:
@@ -140,11 +145,10 @@ def _chain_row(row: dict[str, str], k: int, file: str, path: Path) -> ResultScan
         raise InputError(f"{where}: status {text!r} with has_pose {row['has_pose']}", path)
     T = _pose(row, where, path) if has else None
     reason = row.get("reason") or ""
-    cluster = row.get("cluster")
-    if cluster in (None, "", "0"):
-        return ResultScan(row["file"], _file(file), status, T, reason)
-    reason = f"cluster {cluster}: not tied to the anchor"  # posed in its own cluster's frame
-    return ResultScan(row["file"], _file(file), status, T, reason, other_cluster=cluster)
+    text = row.get("cluster") or "0"  # blank: unposed, or a result without clusters
+    if not (text.isascii() and text.isdigit()):
+        raise InputError(f"{where}: cluster {text!r} is not a cluster number", path)
+    return ResultScan(row["file"], _file(file), status, T, reason, cluster=int(text))
 
 
 def _member(kind: type[_E], value: object) -> _E | None:
@@ -269,9 +273,13 @@ def result_config(folder: Path) -> Config:
 
 
 def select(
-    scans: list[ResultScan], names: list[str] | None, include_suspect: bool
+    scans: list[ResultScan], names: list[str] | None, include_suspect: bool, cluster: int = 0
 ) -> tuple[list[int], list[str]]:
-    """Indices of the scans to export, and one line per scan left out (why)."""
+    """Indices of the scans of ``cluster`` to export, and one line per scan left out (why)."""
+    clusters = {s.cluster for s in scans if s.T_world_scan is not None}
+    if cluster != 0 and cluster not in clusters:
+        have = ", ".join(str(c) for c in sorted(clusters)) or "none"
+        raise InputError(f"--cluster {cluster}: the result has no such cluster (it has {have})")
     wanted = set(range(len(scans)))
     if names is not None:
         if not any(names):
@@ -284,12 +292,10 @@ def select(
     keep, left = [], []
     for k in sorted(wanted):
         s = scans[k]
-        if s.exportable(include_suspect):
+        if s.exportable(include_suspect, cluster):
             keep.append(k)
         else:
-            suspect = s.other_cluster is None and s.status in _SUSPECT
-            hint = " (--include-suspect exports it)" if suspect else ""
-            left.append(f"{s.name}: {s.shown}{': ' + s.reason if s.reason else ''}{hint}")
+            left.append(s.why_left_out(include_suspect, cluster))
     return keep, left
 
 
@@ -313,8 +319,8 @@ def export_scans(
     keep: list[int], scans: list[ResultScan], anchor: int, cfg: Config
 ) -> list[ExportScan]:
     """The scans to export with their poses and the input transform of the run's config
-    (:func:`result_config`); the anchor (or, when it is left out, the first exported scan)
-    gives the CRS."""
+    (:func:`result_config`); the anchor (or, when it is left out or another cluster is
+    exported, the first exported scan) gives the CRS."""
     crs = anchor if anchor in keep else keep[0]
     return [
         ExportScan.from_pose(

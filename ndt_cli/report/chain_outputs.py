@@ -1,6 +1,7 @@
-"""Outputs of ``ndt-chain``: pairs.csv, poses.csv, poses.txt, one T_<target>_<source>.txt per
-link, config_used.yaml, summary.json, topview.png and (E57 input) e57_header_poses.txt, published
-together (:func:`ndt_cli.io.outdir.publish`)."""
+"""Outputs of ``ndt-chain``: pairs.csv, poses.csv, poses.txt (and poses_cluster<K>.txt for a
+network split into clusters), one T_<target>_<source>.txt per link, config_used.yaml,
+summary.json, topview.png and (E57 input) e57_header_poses.txt, published together
+(:func:`ndt_cli.io.outdir.publish`)."""
 
 from __future__ import annotations
 
@@ -102,8 +103,28 @@ def poses_text(result: ChainResult) -> str:
 def _why_not(scan: ScanPose) -> str:
     """Why a scan is not in poses.txt."""
     if scan.status is NodeStatus.OK:
-        return f"ok in cluster {scan.cluster} (its own frame): no link ties it to the anchor"
+        k = scan.cluster
+        return f"ok in cluster {k}: no link ties it to the anchor (see poses_cluster{k}.txt)"
     return f"{scan.status.value}: {scan.reason}"
+
+
+def cluster_poses_files(result: ChainResult) -> dict[str, str]:
+    """``poses_cluster<K>.txt`` for every cluster K > 0 with an ok scan: T_cluster_scan of its
+    ok scans, in the frame of the cluster's first scan (as poses.txt for cluster 0)."""
+    sol, files = result.solution, {}
+    clusters = sorted({s.cluster for s in sol.scans if s.cluster and s.status is NodeStatus.OK})
+    for k in clusters:
+        members = [i for i, s in enumerate(sol.scans) if s.cluster == k]
+        poses = [
+            s.T_world_scan if s.cluster == k and s.status is NodeStatus.OK else None
+            for s in sol.scans
+        ]
+        first = quote_name(result.names[members[0]])
+        world = f"cluster {k}: world frame = frame of {first} (no link ties it to the anchor)"
+        what = f"T_cluster{k}_scan per scan of cluster {k}"
+        files[f"poses_cluster{k}.txt"] = "\n".join(_pose_lines(result.names, poses, what, world))
+        files[f"poses_cluster{k}.txt"] += "\n"
+    return files
 
 
 def chained_text(result: ChainResult) -> str:
@@ -179,6 +200,7 @@ def chain_files(result: ChainResult, cfg: Config, runtime_s: float) -> dict[str,
         "poses.csv": csv_text(poses, POSE_COLUMNS),
         "poses.txt": poses_text(result),
         "poses_chain.txt": chained_text(result),
+        **cluster_poses_files(result),
         **pose_files(result),
     }
     for link, name in zip(result.links, transforms, strict=True):
