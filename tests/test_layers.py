@@ -22,8 +22,7 @@ LAYERS = {
     "report": 6,
     "cli": 7,
 }
-# a circle of the format tables that one registry of point formats replaces
-KNOWN_CIRCLES = [{"ndt_cli.io.records", "ndt_cli.io.records_formats"}]
+KNOWN_CIRCLES: list[set[str]] = []
 
 
 def _module(path: Path) -> str:

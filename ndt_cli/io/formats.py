@@ -1,4 +1,6 @@
-"""One reader per point-file format, all behind the same interface.
+"""One reader per point-file format, all behind the same interface, for registration (x, y, z)
+and export (every attribute) alike; :data:`ndt_cli.io.points.READERS` is their one table.
+Adding a format is a reader class here (or in a module of its own) and its entry there.
 
 Every reader tells the point count its header announces (``None`` when the format has no
 header count), and yields the raw coordinates in chunks of at most ``chunk_size`` points:
@@ -19,7 +21,9 @@ import numpy as np
 import plyfile
 
 from ndt_cli.errors import InputError
+from ndt_cli.io import records_formats as records
 from ndt_cli.io.blocks import Block
+from ndt_cli.io.record_types import Chunk, Summary, require_xyz
 
 logger = logging.getLogger(__name__)
 
@@ -31,6 +35,28 @@ class PointReader:
     """Reads the raw coordinates of one file format (see the module docstring)."""
 
     suffixes: tuple[str, ...] = ()
+    name: str = ""  # the format's name in summaries (``format_name``)
+
+    def format_name(self, path: Path) -> str:
+        """The format's name (``Summary.format``)."""
+        return self.name
+
+    def summary(self, path: Path) -> Summary:
+        """What the header says, without reading the points (:class:`Summary`)."""
+        raise NotImplementedError
+
+    def records(self, path: Path, chunk_points: int) -> Iterator[Chunk]:
+        """Chunks of at most ``chunk_points`` points with every attribute, in file order."""
+        raise NotImplementedError
+
+    def scan_count(self, path: Path) -> int:
+        """Scans the file holds (formats of many scans: their suffix is in
+        :data:`ndt_cli.io.multiscan.MULTI_SCAN`)."""
+        return 1
+
+    def header_pose(self, spec: Path) -> np.ndarray | None:
+        """The 4x4 pose a scan's header stores (scan frame to the file's frame), or None."""
+        return None
 
     def count(self, path: Path) -> int | None:
         """Points the header announces, or None for formats without a header count."""
@@ -64,6 +90,13 @@ class PlyReader(PointReader):
     """PLY (ascii, binary little or big endian): ``vertex`` element, x/y/z of any numeric type."""
 
     suffixes = (".ply",)
+    name = "ply"
+
+    def summary(self, path: Path) -> Summary:
+        return records.ply_summary(path)
+
+    def records(self, path: Path, chunk_points: int) -> Iterator[Chunk]:
+        return records.ply_chunks(path, chunk_points)
 
     def read_xyz(self, path: Path) -> np.ndarray:
         ply = plyfile.PlyData.read(str(path))
@@ -85,6 +118,16 @@ class LasReader(PointReader):
     40 MB filled, read into and dropped). LAZ files are decompressed by laspy, chunk by chunk."""
 
     suffixes = (".las", ".laz")
+    name = "las"
+
+    def format_name(self, path: Path) -> str:
+        return path.suffix.lower().lstrip(".")
+
+    def summary(self, path: Path) -> Summary:
+        return records.las_summary(path)
+
+    def records(self, path: Path, chunk_points: int) -> Iterator[Chunk]:
+        return records.las_chunks(path, chunk_points)
 
     def count(self, path: Path) -> int:
         with laspy.open(path) as reader:
@@ -227,6 +270,13 @@ class PcdReader(PointReader):
     """PCD (ascii, binary, binary_compressed) via pypcd4: fields x, y, z."""
 
     suffixes = (".pcd",)
+    name = "pcd"
+
+    def summary(self, path: Path) -> Summary:
+        return records.pcd_summary(path)
+
+    def records(self, path: Path, chunk_points: int) -> Iterator[Chunk]:
+        return records.pcd_chunks(path, chunk_points)
 
     def read_xyz(self, path: Path) -> np.ndarray:
         if not _pcd_header(path):
@@ -263,6 +313,23 @@ class E57Reader(PointReader):
     """E57 scans (optional pye57); ``FILE.e57#K`` names scan K, see :mod:`ndt_cli.io.e57`."""
 
     suffixes = (".e57",)
+    name = "e57"
+
+    def scan_count(self, path: Path) -> int:
+        from ndt_cli.io import e57
+
+        return e57.scan_count(path)
+
+    def header_pose(self, spec: Path) -> np.ndarray | None:
+        from ndt_cli.io import e57
+
+        return e57.header_pose(spec)
+
+    def summary(self, path: Path) -> Summary:
+        return records.e57_summary(path)
+
+    def records(self, path: Path, chunk_points: int) -> Iterator[Chunk]:
+        return records.e57_chunks(path, chunk_points)
 
     def check(self, path: Path) -> None:
         from ndt_cli.io import e57
@@ -294,6 +361,23 @@ class PtxReader(PointReader):
     """PTX (Leica Cyclone text); ``FILE.ptx#K`` names scan K, see :mod:`ndt_cli.io.ptx`."""
 
     suffixes = (".ptx",)
+    name = "ptx"
+
+    def scan_count(self, path: Path) -> int:
+        from ndt_cli.io import ptx
+
+        return ptx.scan_count(path)
+
+    def header_pose(self, spec: Path) -> np.ndarray | None:
+        from ndt_cli.io import ptx
+
+        return ptx.header_pose(spec)
+
+    def summary(self, path: Path) -> Summary:
+        return records.ptx_summary(path)
+
+    def records(self, path: Path, chunk_points: int) -> Iterator[Chunk]:
+        return records.ptx_chunks(path, chunk_points)
 
     def count(self, path: Path) -> int:
         from ndt_cli.io import ptx
@@ -304,12 +388,6 @@ class PtxReader(PointReader):
         from ndt_cli.io import ptx
 
         return ptx.read_xyz(path)
-
-
-def require_xyz(names: tuple[str, ...] | list[str], path: Path) -> None:
-    """Raise unless the record field ``names`` include x, y and z."""
-    if not {"x", "y", "z"} <= set(names):
-        raise InputError(f"no x, y, z fields (found: {', '.join(names) or 'none'})", path)
 
 
 def stack_xyz(data: np.ndarray) -> np.ndarray:

@@ -10,8 +10,9 @@ from pathlib import Path
 
 from ndt_cli.errors import InputError
 
-MULTI_SCAN = (".e57", ".ptx")
-_SPEC = re.compile(r"^(?P<file>.+\.(e57|ptx))#(?P<index>\d+)$", re.IGNORECASE)
+MULTI_SCAN = (".e57", ".ptx")  # the suffixes of formats whose reader has ``scan_count``
+_SUFFIXES = "|".join(s.lstrip(".") for s in MULTI_SCAN)
+_SPEC = re.compile(rf"^(?P<file>.+\.({_SUFFIXES}))#(?P<index>\d+)$", re.IGNORECASE)
 
 
 def split_spec(spec: str | Path) -> tuple[Path, int | None]:

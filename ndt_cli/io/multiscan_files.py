@@ -9,15 +9,13 @@ from pathlib import Path
 import numpy as np
 
 from ndt_cli.errors import InputError
-from ndt_cli.io import e57, ptx
 from ndt_cli.io.multiscan import MULTI_SCAN, split_spec
+from ndt_cli.io.points import reader_for
 
 
 def scan_count(path: Path) -> int:
-    """Number of scans in an E57 or PTX file."""
-    if path.suffix.lower() == ".ptx":
-        return ptx.scan_count(path)
-    return e57.scan_count(path)
+    """Number of scans in an E57 or PTX file (its reader's count)."""
+    return reader_for(path).scan_count(path)
 
 
 def expand(paths: list[Path]) -> list[Path]:
@@ -36,9 +34,7 @@ def expand(paths: list[Path]) -> list[Path]:
 
 def header_pose(spec: Path) -> np.ndarray | None:
     """The 4x4 pose a scan's header stores (scan frame to the file's frame), or None."""
-    if split_spec(spec)[0].suffix.lower() == ".ptx":
-        return ptx.header_pose(spec)
-    return e57.header_pose(spec)
+    return reader_for(split_spec(spec)[0]).header_pose(spec)
 
 
 def header_poses(paths: list[Path]) -> dict[int, np.ndarray]:

@@ -100,7 +100,7 @@ def reader_for(path: Path) -> PointReader:
     )
 
 
-def _open(path: str | Path) -> tuple[Path, PointReader]:
+def checked_reader(path: str | Path) -> tuple[Path, PointReader]:
     """The path and its reader, after the checks every format shares: the file exists, is a
     regular file (not a folder, FIFO or device), can be read and is not empty."""
     from ndt_cli.io.multiscan import split_spec
@@ -127,7 +127,7 @@ def _open(path: str | Path) -> tuple[Path, PointReader]:
 def check_readable(path: str | Path) -> None:
     """Raise the file's one-line :class:`InputError` now if it cannot be opened as a point
     file (missing, unreadable, unknown format, empty, a broken header), before any heavy work."""
-    p, reader = _open(path)
+    p, reader = checked_reader(path)
     with file_errors(p):
         reader.check(p)
 
@@ -147,7 +147,7 @@ def file_errors(p: Path) -> Iterator[None]:
 
 def count(path: str | Path) -> int | None:
     """Points a file announces in its header (LAS/LAZ), or None for formats without a count."""
-    p, reader = _open(path)
+    p, reader = checked_reader(path)
     with file_errors(p):
         return reader.count(p)
 
@@ -155,7 +155,7 @@ def count(path: str | Path) -> int | None:
 def record_count(path: str | Path) -> int | None:
     """Point records a file's header announces, invalid ones included (LAS/LAZ, E57), or None
     for formats without a count: an upper bound on its points, to budget memory."""
-    p, reader = _open(path)
+    p, reader = checked_reader(path)
     with file_errors(p):
         return reader.record_count(p)
 
@@ -187,7 +187,7 @@ def read_blocks(path: str | Path, chunk_size: int | None = None) -> Iterator[Blo
     (their integers) and E57 are streamed ``chunk_size`` points at a time (memory stays
     bounded), other formats come as one chunk. Non-finite and (0,0,0) points are dropped and
     counted in the log; errors as in :func:`read`."""
-    p, reader = _open(path)
+    p, reader = checked_reader(path)
     n_read = n_nonfinite = n_zero = 0
     with file_errors(p):
         for raw in reader.iter_blocks(p, chunk_size):
@@ -218,7 +218,7 @@ def read(path: str | Path) -> PointCloud:
 
     Raises :class:`InputError` (one line, naming the file) for anything wrong with the file.
     """
-    p, reader = _open(path)
+    p, reader = checked_reader(path)
     with file_errors(p):
         raw = np.asarray(reader.read_xyz(p), dtype=np.float64).reshape(-1, 3)
     n_read = len(raw)

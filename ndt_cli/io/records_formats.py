@@ -1,4 +1,5 @@
-"""The non-LAS readers of :mod:`ndt_cli.io.records`: PLY, PCD, E57 and text files.
+"""Every attribute of a point file, per format: LAS/LAZ, PLY, PCD, E57 and PTX (text files have
+x, y, z only: :mod:`ndt_cli.io.text`); the readers of :mod:`ndt_cli.io.formats` call them.
 
 Each format has a ``*_summary(path) -> Summary`` (header only) and a
 ``*_chunks(path, chunk_points) -> Iterator[Chunk]`` (x, y, z float64 in the file's own
@@ -7,15 +8,17 @@ coordinates plus every attribute, see :mod:`ndt_cli.io.records`).
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import laspy
 import numpy as np
 
 from ndt_cli.errors import InputError
 from ndt_cli.io.multiscan import split_spec
-from ndt_cli.io.records import Chunk, Dimension, Summary
+from ndt_cli.io.record_types import Chunk, Dimension, RawVlr, Summary, is_crs, require_xyz
 
 _PLY_TYPES = {
     "char": "i1",
@@ -36,11 +39,6 @@ _PLY_TYPES = {
     "float64": "f8",
 }
 _XYZ = ("x", "y", "z")
-
-
-def _require_xyz(names: list[str] | tuple[str, ...], path: Path) -> None:
-    if not set(_XYZ) <= set(names):
-        raise InputError(f"no x, y, z fields (found: {', '.join(names) or 'none'})", path)
 
 
 def _slices(n: int, chunk_points: int) -> Iterator[slice]:
@@ -75,7 +73,7 @@ def _ply_header(p: Path) -> tuple[int, list[tuple[str, str]]]:
             raise InputError("PLY header has no end_header line", p)
     if count is None:
         raise InputError("PLY file has no 'vertex' element", p)
-    _require_xyz([name for name, _ in props], p)
+    require_xyz([name for name, _ in props], p)
     return count, props
 
 
@@ -123,7 +121,7 @@ def _pcd_meta(p: Path) -> Any:
     ):
         raise InputError("not a PCD file (no FIELDS/DATA header)", p)
     meta = pypcd4.MetaData.parse_header(lines)
-    _require_xyz(meta.fields, p)
+    require_xyz(meta.fields, p)
     return meta
 
 
@@ -204,18 +202,6 @@ def ptx_chunks(p: Path, chunk_points: int) -> Iterator[Chunk]:
 
 
 # --- text ------------------------------------------------------------------------------------
-
-
-def text_summary(p: Path) -> Summary:
-    return Summary(p, "text", None, None, ())
-
-
-def text_chunks(p: Path, chunk_points: int) -> Iterator[Chunk]:
-    from ndt_cli.io.text import TextReader
-
-    xyz = TextReader().read_xyz(p)
-    for s in _slices(len(xyz), chunk_points):
-        yield {a: np.ascontiguousarray(xyz[s, k]) for k, a in enumerate(_XYZ)}
 
 
 # --- E57 -------------------------------------------------------------------------------------
@@ -362,3 +348,113 @@ def e57_chunks(p: Path, chunk_points: int) -> Iterator[Chunk]:
             reader.close()
     finally:
         e57.close()
+
+
+# --- LAS / LAZ -------------------------------------------------------------------------------
+
+
+def _las_dimensions(point_format: laspy.PointFormat) -> tuple[Dimension, ...]:
+    """Every dimension of a LAS point format but X, Y, Z (bit fields as uint8)."""
+    out = []
+    for d in point_format.dimensions:
+        if d.name in ("X", "Y", "Z"):
+            continue
+        if d.is_standard:
+            out.append(Dimension(d.name, d.dtype or np.dtype(np.uint8), "las"))
+            continue
+        dtype = d.dtype if d.num_elements == 1 else np.dtype((d.dtype.base, d.num_elements))
+        scaled = d.scales is not None and d.offsets is not None
+        out.append(
+            Dimension(
+                d.name,
+                np.dtype(dtype),
+                "extra",
+                tuple(map(float, np.atleast_1d(d.scales))) if scaled else None,
+                tuple(map(float, np.atleast_1d(d.offsets))) if scaled else None,
+                d.description,
+            )
+        )
+    return tuple(out)
+
+
+def _las_bounds(header: laspy.LasHeader) -> tuple[np.ndarray, np.ndarray] | None:
+    """The header's bounding box, or None when it is missing (all zeros) or inconsistent."""
+    lo, hi = np.asarray(header.mins, float), np.asarray(header.maxs, float)
+    if not (np.isfinite(lo).all() and np.isfinite(hi).all()) or (lo > hi).any():
+        return None
+    if not lo.any() and not hi.any() and header.point_count > 1:
+        return None
+    return lo, hi
+
+
+def las_summary(p: Path) -> Summary:
+    with laspy.open(p) as reader:
+        h = reader.header
+        return Summary(
+            path=p,
+            format=split_spec(p)[0].suffix.lower().lstrip("."),
+            count=int(h.point_count),
+            bounds=_las_bounds(h),
+            dimensions=_las_dimensions(h.point_format),
+            point_format=int(h.point_format.id),
+            version=str(h.version),
+            scales=np.array(h.scales, float),
+            offsets=np.array(h.offsets, float),
+            crs=tuple(v for v in raw_vlrs(p) if is_crs(v)),
+            wkt=bool(h.global_encoding.wkt),
+            gps_standard=bool(h.global_encoding.gps_time_type.value),
+        )
+
+
+def las_chunks(p: Path, chunk_points: int) -> Iterator[Chunk]:
+    with laspy.open(p) as reader:
+        n = int(reader.header.point_count)
+        dims = _las_dimensions(reader.header.point_format)
+        seen = 0
+        for rec in reader.chunk_iterator(chunk_points):
+            seen += len(rec)
+            if seen > n:
+                raise InputError(f"file holds more points than its header's {n}", p)
+            out = {a: np.asarray(getattr(rec, a), dtype=np.float64) for a in "xyz"}
+            for d in dims:
+                out[d.name] = np.asarray(rec.array[d.name] if d.kind == "extra" else rec[d.name])
+            yield out
+    if seen != n:
+        raise InputError(f"truncated file: header announces {n} points, found {seen}", p)
+
+
+def _text(raw: bytes) -> str:
+    return raw.split(b"\0", 1)[0].decode("ascii", errors="replace")
+
+
+def raw_vlrs(path: str | Path) -> list[RawVlr]:
+    """Every VLR and EVLR of a LAS/LAZ file with its payload bytes exactly as stored.
+
+    Read from the file's bytes (LAS 1.0-1.4 header layout), not re-encoded by laspy, so that a
+    CRS can be copied byte for byte.
+    """
+    out: list[RawVlr] = []
+    with open(split_spec(path)[0], "rb") as fh:
+        head = fh.read(375)
+        if head[:4] != b"LASF" or len(head) < 227:
+            raise InputError("not a LAS file (no LASF signature)", path)
+        header_size, _, n_vlrs = struct.unpack_from("<HII", head, 94)
+        minor = head[25]
+        fh.seek(header_size)
+        for _ in range(n_vlrs):
+            rec = fh.read(54)
+            if len(rec) < 54:
+                raise InputError("truncated VLR in the header", path)
+            _, user, rid, length, desc = struct.unpack("<H16sHH32s", rec)
+            out.append(RawVlr(_text(user), rid, _text(desc), fh.read(length)))
+        if minor >= 4 and len(head) >= 375:
+            start, n_evlrs = struct.unpack_from("<QI", head, 235)
+            if n_evlrs:
+                fh.seek(start)
+            for _ in range(n_evlrs if start else 0):
+                rec = fh.read(60)
+                if len(rec) < 60:
+                    break
+                _, user, rid, length, desc = struct.unpack("<H16sHQ32s", rec)
+                out.append(RawVlr(_text(user), rid, _text(desc), fh.read(length), True))
+    return out

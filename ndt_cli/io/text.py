@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
 from ndt_cli.errors import InputError
 from ndt_cli.io.formats import PointReader
+from ndt_cli.io.record_types import Chunk, Summary
 
 _SPLIT = re.compile(r"[\s,;]+")
 _HEAD_LINES = 200  # leading lines searched for the first row of points
@@ -72,6 +74,17 @@ class TextReader(PointReader):
     """
 
     suffixes = (".xyz", ".txt", ".csv", ".3d")  # .3d: 3DTK's plain "x y z" lines
+    name = "text"
+
+    def summary(self, path: Path) -> Summary:
+        return Summary(path, self.name, None, None, ())
+
+    def records(self, path: Path, chunk_points: int) -> Iterator[Chunk]:
+        """x, y, z only: a text file has no other attribute."""
+        xyz = self.read_xyz(path)
+        for start in range(0, len(xyz), chunk_points):
+            part = xyz[start : start + chunk_points]
+            yield {a: np.ascontiguousarray(part[:, k]) for k, a in enumerate("xyz")}
 
     def read_xyz(self, path: Path) -> np.ndarray:
         try:
