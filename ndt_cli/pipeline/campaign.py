@@ -77,6 +77,7 @@ ROUNDS = 3  # consolidation rounds: place, plan, register
 BRIDGES = 2  # registrations tried between a group and the others, best coarse matches first
 PROBES = 2  # placed scans nearest to a prediction that a scan is registered to, to test it
 ATTEMPTS = 2  # distinct predictions of a scan's place tried by full registrations
+BRIDGE_MEMBERS = 8  # scans of a group whose coarse matches with other groups are ranked
 CACHED_SCANS = 48  # prepared scans the campaign keeps between steps (others are read again)
 
 
@@ -285,27 +286,44 @@ class Campaign:
         """Join the groups of placed scans where they overlap: for each group but the
         largest, its :data:`BRIDGES` best coarse matches (pairs with a new scan, not tried
         yet) with scans of other groups are registered, pairs near by known positions first;
-        an ok one joins the two groups."""
+        an ok one joins the two groups. The pairs ranked: the group's edge
+        (:meth:`_edge`), its neighbours in campaign order and by known positions."""
         fresh = set(new)
         while True:
             groups = self._groups()
             pairs: list[Pair] = []
             for group in groups[1:]:
                 mine = set(group)
-                cross = [
-                    pair_of(a, b)
-                    for a in group
-                    for b in self.where
-                    if b not in mine
-                    and (a in fresh or b in fresh)
-                    and pair_of(a, b) not in self.links
-                ]
                 near = {pair_of(a, b) for a in group for b in self._near(a, self.where)}
+                hinted = {pair_of(a, a + d) for a in group for d in HINTS if a + d in self.where}
+                edge = {pair_of(a, b) for a in self._edge(group) for b in self.where}
+                cross = [
+                    p
+                    for p in sorted(edge | near | hinted)
+                    if not set(p) <= mine
+                    and (p[0] in fresh or p[1] in fresh)
+                    and p not in self.links
+                ]
                 cross.sort(key=lambda p: (p not in near, -self._match(*p).score, p))
                 pairs += [p for p in cross[:BRIDGES] if p not in pairs]
             self._register([self._planned(p) for p in pairs], both_ways=True)
             if not any(self._join(p) for p in pairs):
                 return
+
+    def _edge(self, group: list[int]) -> list[int]:
+        """The :data:`BRIDGE_MEMBERS` scans of a group most likely at its edge, where another
+        group may continue it: those with the fewest ok links within it (the ends of a
+        street), ties by campaign order; so that bridging costs coarse matches in proportion
+        to the campaign, not to the product of two groups' sizes."""
+        if len(group) <= BRIDGE_MEMBERS:
+            return group
+        mine = set(group)
+        degree = dict.fromkeys(group, 0)
+        for (a, b), link in self.links.items():
+            if link.ok and a in mine and b in mine:
+                degree[a] += 1
+                degree[b] += 1
+        return sorted(group, key=lambda s: (degree[s], s))[:BRIDGE_MEMBERS]
 
     def _positions(self) -> dict[int, tuple[np.ndarray, float]]:
         """(x, y) m and horizontal sigma of the scans with a control station."""
