@@ -291,6 +291,24 @@ def test_sigint_stops_cleanly_and_resume_completes(street6, tmp_path):
     assert _reused_every_kept_link(out, before)
 
 
+@pytest.mark.slow
+def test_ctrl_c_reaches_a_chain_started_with_sigint_blocked(street6, tmp_path):
+    """A parent that had SIGINT blocked when it started the command (the mask is inherited)
+    must not make Ctrl-C a no-op: the chain stops with 130 and one line."""
+    out = tmp_path / "o"
+    proc = subprocess.Popen(
+        [*CHAIN, *map(str, street6), "-o", str(out), "-j", "1", "-q"],
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}),
+    )
+    _wait_for_links(out, 1, proc)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "--resume" in err and len(err.strip().splitlines()) == 1
+
+
 def _reused_every_kept_link(out: Path, before: dict[str, bytes]) -> bool:
     """Every link file of the interrupted run is still there, unchanged (not registered
     again), and the result says it reused links."""

@@ -12,6 +12,7 @@ import atexit
 import contextlib
 import gc
 import logging
+import signal
 import sys
 import warnings
 from collections.abc import Iterator
@@ -248,10 +249,20 @@ def fail(exc: NdtError, prog: str) -> typer.Exit:
     return typer.Exit(exc.exit_code)
 
 
+def let_ctrl_c_in() -> None:
+    """Unblock SIGINT in this thread. A process inherits its parent's signal mask: started by
+    a program that had SIGINT blocked at that moment, a command would never see Ctrl-C (it ran
+    to its end and exited 0). A SIGINT that is ignored (``nohup``, a background job) stays
+    ignored: that is the user's choice."""
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 @contextlib.contextmanager
 def user_errors(prog: str, debug: bool, interrupted: str = "interrupted") -> Iterator[None]:
     """Turn user errors and Ctrl-C into one line on stderr and the documented exit code; print
     the held messages when the block ends without one."""
+    let_ctrl_c_in()
     try:
         yield
     except NdtError as exc:
