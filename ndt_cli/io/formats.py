@@ -21,7 +21,7 @@ import numpy as np
 import plyfile
 
 from ndt_cli.errors import InputError
-from ndt_cli.io import records_formats as records
+from ndt_cli.io import records_formats as record_io
 from ndt_cli.io.blocks import Block
 from ndt_cli.io.record_types import Chunk, Summary, require_xyz
 
@@ -93,10 +93,10 @@ class PlyReader(PointReader):
     name = "ply"
 
     def summary(self, path: Path) -> Summary:
-        return records.ply_summary(path)
+        return record_io.ply_summary(path)
 
     def records(self, path: Path, chunk_points: int) -> Iterator[Chunk]:
-        return records.ply_chunks(path, chunk_points)
+        return record_io.ply_chunks(path, chunk_points)
 
     def read_xyz(self, path: Path) -> np.ndarray:
         ply = plyfile.PlyData.read(str(path))
@@ -124,10 +124,10 @@ class LasReader(PointReader):
         return path.suffix.lower().lstrip(".")
 
     def summary(self, path: Path) -> Summary:
-        return records.las_summary(path)
+        return record_io.las_summary(path)
 
     def records(self, path: Path, chunk_points: int) -> Iterator[Chunk]:
-        return records.las_chunks(path, chunk_points)
+        return record_io.las_chunks(path, chunk_points)
 
     def count(self, path: Path) -> int:
         with laspy.open(path) as reader:
@@ -273,10 +273,10 @@ class PcdReader(PointReader):
     name = "pcd"
 
     def summary(self, path: Path) -> Summary:
-        return records.pcd_summary(path)
+        return record_io.pcd_summary(path)
 
     def records(self, path: Path, chunk_points: int) -> Iterator[Chunk]:
-        return records.pcd_chunks(path, chunk_points)
+        return record_io.pcd_chunks(path, chunk_points)
 
     def read_xyz(self, path: Path) -> np.ndarray:
         if not _pcd_header(path):
@@ -326,10 +326,10 @@ class E57Reader(PointReader):
         return e57.header_pose(spec)
 
     def summary(self, path: Path) -> Summary:
-        return records.e57_summary(path)
+        return record_io.e57_summary(path)
 
     def records(self, path: Path, chunk_points: int) -> Iterator[Chunk]:
-        return records.e57_chunks(path, chunk_points)
+        return record_io.e57_chunks(path, chunk_points)
 
     def check(self, path: Path) -> None:
         from ndt_cli.io import e57
@@ -374,10 +374,10 @@ class PtxReader(PointReader):
         return ptx.header_pose(spec)
 
     def summary(self, path: Path) -> Summary:
-        return records.ptx_summary(path)
+        return record_io.ptx_summary(path)
 
     def records(self, path: Path, chunk_points: int) -> Iterator[Chunk]:
-        return records.ptx_chunks(path, chunk_points)
+        return record_io.ptx_chunks(path, chunk_points)
 
     def count(self, path: Path) -> int:
         from ndt_cli.io import ptx
