@@ -37,6 +37,26 @@ RECENT_BITS = 12  # voxels remembered while grouping (about a scan line's), 64 K
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # Fibonacci hashing: 2**64 / golden ratio
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _slice_bits(hz, heights, half):  # pragma: no cover - compiled
+    # bit k set: the height hz (m above the ground) is within half of slice k's height
+    bits = np.int64(0)
+    for k in range(heights.shape[0]):
+        if abs(hz - heights[k]) <= half:
+            bits |= np.int64(1) << k
+    return bits
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _voxel_key(x, y, z, voxel):  # pragma: no cover - compiled
+    # the packed key of a point's voxel, and whether its indices fit the key's 21 bits each
+    ix = np.int64(np.floor(x / voxel)) + _OFFSET
+    iy = np.int64(np.floor(y / voxel)) + _OFFSET
+    iz = np.int64(np.floor(z / voxel)) + _OFFSET
+    fits = min(ix, iy, iz) >= 0 and max(ix, iy, iz) < 2 * _OFFSET
+    return (ix << 42) | (iy << 21) | iz, fits
+
+
 @numba.njit(cache=True, nogil=True)
 def _slice_pass(
     points,
@@ -87,22 +107,15 @@ def _slice_pass(
         gi = min(max(np.int64(np.floor((lx - frame[0]) * frame[2])), 0), nx - 1)
         gj = min(max(np.int64(np.floor((ly - frame[1]) * frame[2])), 0), ny - 1)
         hz = lz - ground[gi, gj]
-        bits = np.int64(0)
-        for k in range(heights.shape[0]):
-            if abs(hz - heights[k]) <= half:
-                bits |= np.int64(1) << k
+        bits = _slice_bits(hz, heights, half)
         if bits != 0:
             bits_out[hit] = bits
             xy[hit, 0] = lx
             xy[hit, 1] = ly
             hit += 1
         if voxel > 0.0:
-            ix = np.int64(np.floor(x / voxel)) + _OFFSET
-            iy = np.int64(np.floor(y / voxel)) + _OFFSET
-            iz = np.int64(np.floor(z / voxel)) + _OFFSET
-            if min(ix, iy, iz) < 0 or max(ix, iy, iz) >= 2 * _OFFSET:
-                inside = False
-            key = (ix << 42) | (iy << 21) | iz
+            key, fits = _voxel_key(x, y, z, voxel)
+            inside = inside and fits
             h = np.int64((np.uint64(key) * _GOLDEN) >> shift)
             row = recent_row[h]
             if row < 0 or recent_key[h] != key:  # neighbouring points and scan lines share

@@ -122,8 +122,8 @@ def cluster_poses_files(result: ChainResult) -> dict[str, str]:
         first = quote_name(result.names[members[0]])
         world = f"cluster {k}: world frame = frame of {first} (no link ties it to the anchor)"
         what = f"T_cluster{k}_scan per scan of cluster {k}"
-        files[f"poses_cluster{k}.txt"] = "\n".join(_pose_lines(result.names, poses, what, world))
-        files[f"poses_cluster{k}.txt"] += "\n"
+        lines = _pose_lines(result.names, poses, what, world)
+        files[f"poses_cluster{k}.txt"] = "\n".join(lines) + "\n"
     return files
 
 
