@@ -105,3 +105,46 @@ def test_the_local_pool_never_starts_more_processes_than_cores():
     finally:
         pool.close()
     assert make_executor(ExecutorKind.LOCAL, 1).jobs == 1
+
+
+def _threads_after(barrier) -> int:
+    """This worker's kernel threads while the other party of ``barrier`` (None: alone) runs."""
+    from ndt_cli.core import threads
+
+    if barrier is None:
+        return threads.threads()
+    barrier.wait(timeout=30)  # both tasks are running
+    n = threads.threads()
+    barrier.wait(timeout=30)  # neither has finished before both have looked
+    return n
+
+
+def test_workers_share_the_cores_among_those_running_a_task():
+    """A task that runs alone takes every core; two tasks at once take half each. (Results
+    do not depend on the number of threads, so only the time changes.)"""
+    import multiprocessing
+
+    from ndt_cli.core import threads
+
+    cores = min(os.cpu_count() or 1, threads.initial())
+    pool = WorkerPool(2)
+    with multiprocessing.Manager() as manager:
+        together = manager.Barrier(2)
+        try:
+            alone = dict(pool.run({"alone": partial(_threads_after, None)}))
+            both = dict(pool.run({k: partial(_threads_after, together) for k in "ab"}))
+            after_both = dict(pool.run({"alone again": partial(_threads_after, None)}))
+        finally:
+            pool.close()
+    assert alone["alone"] == cores
+    assert both == {"a": max(1, cores // 2), "b": max(1, cores // 2)}
+    assert after_both["alone again"] == cores
+
+
+def test_a_pool_given_threads_keeps_them_whatever_runs_beside():
+    pool = WorkerPool(2, threads=1)
+    try:
+        alone = dict(pool.run({"alone": partial(_threads_after, None)}))
+    finally:
+        pool.close()
+    assert alone == {"alone": 1}

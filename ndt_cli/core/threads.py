@@ -7,7 +7,10 @@ compile on an empty cache, and the first run of the command would pay for all of
 
 A task writes only its own outputs, so results are bit-identical whatever the number of threads.
 The budget also bounds the threads of neighbour queries. It starts at ``NUMBA_NUM_THREADS`` when
-set, else the cores this process may use; a chain's worker lowers it to its share of the cores.
+set, else the cores this process may use. A chain's worker either lowers it to a fixed share of
+the cores, or shares the cores with its sibling workers (:func:`share_cores`): then each call
+takes the cores divided among the workers busy at that moment, so that a link or a scan left to
+run alone gets every core instead of leaving the others idle.
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
+from typing import Protocol
 
 
 def _cores() -> int:
@@ -35,11 +39,29 @@ def initial() -> int:
 _budget = initial()
 _pool: ThreadPoolExecutor | None = None
 _pool_size = 0
+_busy: Counter | None = None  # workers busy now, shared by the processes of one pool
+_shared_cores = 1  # the cores the processes of that pool share
+
+
+class Counter(Protocol):
+    """A count shared by processes (``multiprocessing.Value("i")``)."""
+
+    value: int
 
 
 def threads() -> int:
-    """Threads the kernels and neighbour queries of this process may use (at least 1)."""
-    return _budget
+    """Threads the kernels and neighbour queries of this process may use (at least 1): the
+    budget, or while sharing cores, the cores over the workers busy now (at most the budget)."""
+    if _busy is None:
+        return _budget
+    return max(1, min(_budget, _shared_cores // max(1, _busy.value)))
+
+
+def share_cores(busy: Counter | None, cores: int) -> None:
+    """Share ``cores`` with the other processes that count themselves in ``busy`` while they
+    run a task (None: stop sharing, back to the fixed budget)."""
+    global _busy, _shared_cores
+    _busy, _shared_cores = busy, max(1, int(cores))
 
 
 def set_threads(n: int) -> None:

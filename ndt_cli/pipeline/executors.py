@@ -44,4 +44,4 @@ def make_executor(kind: ExecutorKind, jobs: int | None, scheduler: str | None = 
         from ndt_cli.pipeline.dask_executor import DaskPool
 
         return DaskPool(scheduler, n, threads_per_job(n))
-    return WorkerPool(n, threads_per_job(n))
+    return WorkerPool(n)

@@ -11,6 +11,7 @@ import threading
 from collections.abc import Callable, Hashable
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
+from typing import Any
 
 from ndt_cli.pipeline.workers import (
     Failure,
@@ -18,18 +19,39 @@ from ndt_cli.pipeline.workers import (
     Task,
     Then,
     set_threads,
-    threads_per_job,
+    share_threads,
     worker_error,
 )
 
 log = logging.getLogger(__name__)
 
 
-def _init_worker(threads: int, init: Callable[[], None] | None) -> None:
+_busy: Any = None  # in a worker: the pool's count of workers running a task (shared cores)
+
+
+def _init_worker(threads: int | None, busy: Any, init: Callable[[], None] | None) -> None:
+    global _busy
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is handled by the parent
-    set_threads(threads)
+    if busy is None:
+        set_threads(threads or 1)
+    else:
+        _busy = busy
+        share_threads(busy)
     if init is not None:
         init()
+
+
+def _counted(task: Task) -> Any:
+    """Run ``task`` in a worker, counted among the pool's busy workers while it runs."""
+    if _busy is None:
+        return task()
+    with _busy.get_lock():
+        _busy.value += 1
+    try:
+        return task()
+    finally:
+        with _busy.get_lock():
+            _busy.value -= 1
 
 
 def start_method() -> str:
@@ -65,7 +87,8 @@ class WorkerPool:
     dies (killed, out of memory, a crash in a library), every task in flight fails with
     BrokenProcessPool; those tasks are then rerun one at a time in a fresh single-worker pool,
     so only the task that kills its worker fails. ``init`` runs once in every worker process
-    before its first task.
+    before its first task. Without ``threads``, the workers share the cores: each kernel call
+    of a task takes the cores over the number of workers running a task at that moment.
     """
 
     ships_data = True
@@ -74,7 +97,7 @@ class WorkerPool:
         self, jobs: int, threads: int | None = None, init: Callable[[], None] | None = None
     ) -> None:
         self.jobs = jobs
-        self.threads = threads if threads is not None else threads_per_job(jobs)
+        self.threads = threads  # kernel threads of each worker; None: they share the cores
         self._init = init
         self._pool: ProcessPoolExecutor | None = None
 
@@ -82,11 +105,13 @@ class WorkerPool:
         self.close()
         method = start_method()
         log.debug("starting %d worker process(es) by %s", workers, method)
+        context = multiprocessing.get_context(method)
+        busy = context.Value("i", 0) if self.threads is None else None
         self._pool = ProcessPoolExecutor(
             max_workers=workers,
-            mp_context=multiprocessing.get_context(method),
+            mp_context=context,
             initializer=_init_worker,
-            initargs=(self.threads, self._init),
+            initargs=(self.threads, busy, self._init),
         )
         return self._pool
 
@@ -145,7 +170,7 @@ def _collect(
 
     def submit(key: Hashable) -> None:
         try:
-            pending[pool.submit(tasks[key])] = key
+            pending[pool.submit(_counted, tasks[key])] = key
         except BrokenProcessPool:
             broken.append(key)
 

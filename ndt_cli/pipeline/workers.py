@@ -61,6 +61,16 @@ def set_threads(threads: int) -> None:
     budget.set_threads(min(threads, budget.initial()))
 
 
+def share_threads(busy: Any) -> None:
+    """Let this worker share the machine's cores with the other workers of its pool: ``busy``
+    (a ``multiprocessing.Value("i")``) counts those running a task; each kernel call takes
+    the cores over that count (:func:`ndt_cli.core.threads.share_cores`). BLAS gets one thread."""
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    from ndt_cli.core import threads as budget
+
+    budget.share_cores(busy, os.cpu_count() or 1)
+
+
 def worker_error(exc: BaseException) -> Failure:
     """The failure of a task that raised (a bug in it, or a worker its cluster lost)."""
     return Failure(f"worker error: {' '.join(str(exc).split())[:200]}")
