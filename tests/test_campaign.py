@@ -233,3 +233,46 @@ def test_a_group_s_edge_is_its_scans_with_the_fewest_ok_links_within_it(tmp_path
         assert campaign._edge(line[:5]) == line[:5]
     finally:
         campaign.close()
+
+
+@pytest.mark.parametrize(
+    ("outcomes", "hint"),
+    [
+        ([], True),
+        ([False] * 5, True),  # too few scans to judge
+        ([True, False, True, False, True, False], True),  # half placed by the order
+        ([True, False, False, False, True, False], False),
+        ([True] * 9 + [False], True),  # a walk with one gap
+    ],
+)
+def test_the_order_stays_a_hint_while_it_places_half_the_scans(outcomes, hint):
+    from ndt_cli.pipeline.discovery import HINT_TRIALS, order_is_a_hint
+
+    assert HINT_TRIALS == 6  # the cases above are written for it
+    assert order_is_a_hint(outcomes) is hint
+
+
+@pytest.mark.slow
+def test_a_shuffled_route_is_placed_by_its_coarse_matches_with_the_same_poses(tmp_path, caplog):
+    """Sixteen scans of a route in random order: the order soon proves no hint, the rest are
+    placed best coarse match first; every scan is ok, right and where the route in order
+    puts it."""
+    route = sim.route(seed=3, n_scans=16, rays=(1500, 200))
+    mixed = sim.shuffled(route, seed=2)
+    # file k of the mixed campaign holds scan order[k] of the route (its true pose says which)
+    order = [
+        next(j for j, P in enumerate(route.poses) if np.array_equal(P, Q)) for Q in mixed.poses
+    ]
+    walk = run_chain(_write(tmp_path / "walk", route), Config(), tmp_path / "a", jobs=2)
+    with caplog.at_level("INFO", logger="ndt_cli.progress"):
+        files = _write(tmp_path / "mixed", mixed)
+        shuffled = run_chain(files, Config(), tmp_path / "b", jobs=2, anchor=order.index(0))
+    assert any("no hint" in r.getMessage() for r in caplog.records)
+    inv0 = np.linalg.inv(route.poses[0])
+    for k, scan in enumerate(order):
+        a, b = walk.solution.scans[scan], shuffled.solution.scans[k]
+        assert a.status is NodeStatus.OK and b.status is NodeStatus.OK, (scan, b.reason)
+        assert a.cluster == b.cluster == 0, (scan, b.cluster)
+        assert _right(b.T_world_scan, inv0 @ route.poses[scan]), scan
+        rot, trans = transform_errors(a.T_world_scan, b.T_world_scan)
+        assert rot < 0.001 and trans < 0.001, (scan, rot, trans)

@@ -50,6 +50,7 @@ from ndt_cli.pipeline.discovery import (
     consensus,
     near_by_position,
     nearest,
+    order_is_a_hint,
     predict,
 )
 from ndt_cli.pipeline.executors import Executor
@@ -77,6 +78,7 @@ ROUNDS = 3  # consolidation rounds: place, plan, register
 BRIDGES = 2  # registrations tried between a group and the others, best coarse matches first
 PROBES = 2  # placed scans nearest to a prediction that a scan is registered to, to test it
 ATTEMPTS = 2  # distinct predictions of a scan's place tried by full registrations
+BRIDGE_ROUNDS = 3  # rounds in a row without a join before the groups are left apart
 BRIDGE_MEMBERS = 8  # scans of a group whose coarse matches with other groups are ranked
 CACHED_SCANS = 48  # prepared scans the campaign keeps between steps (others are read again)
 
@@ -224,29 +226,61 @@ class Campaign:
             self._run(todo, [])
 
     def _discover(self, new: list[int]) -> None:
-        """Place each new scan in turn (not in the classic chain)."""
+        """Place each new scan in turn (not in the classic chain): in campaign order while the
+        order is a hint (:func:`order_is_a_hint`), then the rest by their coarse matches with
+        the placed scans, the best matched first (:meth:`_place_by_matches`)."""
         if self.net.classic:
             return
-        for scan in new:
-            if scan in self.summaries:
-                self._place(scan)
+        todo = [s for s in new if s in self.summaries]
+        hinted: list[bool] = []  # per scan placed so far: did its order hint place it?
+        while todo:
+            if not order_is_a_hint(hinted):
+                progress.info("the campaign order is no hint: placing by coarse matches")
+                self._place_by_matches(self._unplace_lonely(new) + todo)
+                return
+            outcome = self._place(todo.pop(0))
+            if outcome is not None:
+                hinted.append(outcome)
 
-    def _place(self, scan: int) -> None:
+    def _unplace_lonely(self, new: list[int]) -> list[int]:
+        """The new scans placed alone (a group of one, not the largest), taken out of place
+        to be placed again beside the others (their links are kept)."""
+        lonely = [g[0] for g in self._groups()[1:] if len(g) == 1 and g[0] in new]
+        for scan in lonely:
+            del self.where[scan]
+        return lonely
+
+    def _place_by_matches(self, todo: list[int]) -> None:
+        """Place ``todo`` one at a time, each time the scan whose best coarse match with a
+        placed scan scores highest (ties: campaign order), without order hints: so that each
+        scan is placed beside scans already placed, instead of alone and bridged later."""
+        pending = list(todo)
+        while pending:
+            best = {
+                s: max((self._match(p, s).score for p in self.where), default=0.0) for s in pending
+            }
+            scan = max(pending, key=lambda s: (best[s], -s))
+            pending.remove(scan)
+            self._place(scan, hints=False)
+
+    def _place(self, scan: int, hints: bool = True) -> bool | None:
         """Place the scan: first by its neighbours in campaign order (the scan before it, the
         best coarse match among them and those that agree with it are registered); without an
         ok link, by every placed scan: the best coarse prediction, registered to the
         :data:`PROBES` placed scans nearest to it, then the next distinct one, up to
         :data:`ATTEMPTS`. Scans near it by known positions (control stations) are registered
-        in the first step too. Nothing fits: a group of its own, for now."""
+        in the first step too. Nothing fits: a group of its own, for now. Returns whether the
+        order hint placed it (None: no hint, ``hints`` False or no neighbour placed)."""
         where = self.where
-        hinted = consensus(predict(scan, [scan + d for d in HINTS], where, self._match))
+        around = [scan + d for d in HINTS] if hints else []
+        hinted = consensus(predict(scan, around, where, self._match))
         known = self._near(scan, where)
         if hinted or known:
             walk = [scan - 1] if hinted and scan - 1 in where else []  # the scan before it
             targets = dict.fromkeys([*walk, *(g.via for g in hinted), *known])
             self._register([self._planned(pair_of(scan, t)) for t in targets])
             if self._settle(scan):
-                return
+                return True if hinted else None
         tried: list[Prediction] = hinted[:1]
         guesses = predict(scan, sorted(where), where, self._match)
         for guess in sorted(guesses, key=lambda g: (-g.score, g.via)):
@@ -262,8 +296,9 @@ class Campaign:
             targets = dict.fromkeys([guess.via, *near])
             self._register([self._planned(pair_of(scan, t)) for t in targets])
             if self._settle(scan):
-                return
+                return False if hinted else None
         where[scan] = Placed(scan, np.eye(4))
+        return False if hinted else None
 
     def _settle(self, scan: int) -> bool:
         """Place the scan by its ok links to placed scans (:func:`_fit`); the groups its other
@@ -287,12 +322,18 @@ class Campaign:
         largest, its :data:`BRIDGES` best coarse matches (pairs with a new scan, not tried
         yet) with scans of other groups are registered, pairs near by known positions first;
         an ok one joins the two groups. The pairs ranked: the group's edge
-        (:meth:`_edge`), its neighbours in campaign order and by known positions."""
+        (:meth:`_edge`), its neighbours in campaign order and by known positions. A round
+        without a join is followed by up to :data:`BRIDGE_ROUNDS` - 1 more for the groups of
+        several scans (a piece of the campaign, placed out of order, whose best coarse matches
+        missed), not for a lone scan (a scan that fits nowhere stays alone)."""
         fresh = set(new)
-        while True:
+        failed = 0
+        while failed < BRIDGE_ROUNDS:
             groups = self._groups()
             pairs: list[Pair] = []
             for group in groups[1:]:
+                if failed and len(group) == 1:
+                    continue
                 mine = set(group)
                 near = {pair_of(a, b) for a in group for b in self._near(a, self.where)}
                 hinted = {pair_of(a, a + d) for a in group for d in HINTS if a + d in self.where}
@@ -306,9 +347,11 @@ class Campaign:
                 ]
                 cross.sort(key=lambda p: (p not in near, -self._match(*p).score, p))
                 pairs += [p for p in cross[:BRIDGES] if p not in pairs]
-            self._register([self._planned(p) for p in pairs], both_ways=True)
-            if not any(self._join(p) for p in pairs):
+            if not pairs:
                 return
+            self._register([self._planned(p) for p in pairs], both_ways=True)
+            joined = [self._join(p) for p in pairs]
+            failed = 0 if any(joined) else failed + 1
 
     def _edge(self, group: list[int]) -> list[int]:
         """The :data:`BRIDGE_MEMBERS` scans of a group most likely at its edge, where another
