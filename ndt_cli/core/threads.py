@@ -18,6 +18,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import AbstractContextManager
 from typing import Protocol
 
 
@@ -44,9 +45,11 @@ _shared_cores = 1  # the cores the processes of that pool share
 
 
 class Counter(Protocol):
-    """A count shared by processes (``multiprocessing.Value("i")``)."""
+    """A count shared by processes (``multiprocessing.Value("i")``), changed under its lock."""
 
     value: int
+
+    def get_lock(self) -> AbstractContextManager[object]: ...
 
 
 def threads() -> int:

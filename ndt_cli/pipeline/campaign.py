@@ -254,14 +254,13 @@ class Campaign:
         """Place ``todo`` one at a time, each time the scan whose best coarse match with a
         placed scan scores highest (ties: campaign order), without order hints: so that each
         scan is placed beside scans already placed, instead of alone and bridged later."""
-        pending = list(todo)
-        while pending:
-            best = {
-                s: max((self._match(p, s).score for p in self.where), default=0.0) for s in pending
-            }
-            scan = max(pending, key=lambda s: (best[s], -s))
-            pending.remove(scan)
-            self._place(scan, hints=False)
+        best = {s: max((self._match(p, s).score for p in self.where), default=0.0) for s in todo}
+        while best:
+            scan = max(best, key=lambda s: (best[s], -s))
+            del best[scan]
+            self._place(scan, hints=False)  # placed now, in a group or alone
+            for s in best:
+                best[s] = max(best[s], self._match(scan, s).score)
 
     def _place(self, scan: int, hints: bool = True) -> bool | None:
         """Place the scan: first by its neighbours in campaign order (the scan before it, the
@@ -274,6 +273,7 @@ class Campaign:
         where = self.where
         around = [scan + d for d in HINTS] if hints else []
         hinted = consensus(predict(scan, around, where, self._match))
+        missed = False if hinted else None  # what to return unless the hint places it
         known = self._near(scan, where)
         if hinted or known:
             walk = [scan - 1] if hinted and scan - 1 in where else []  # the scan before it
@@ -296,9 +296,9 @@ class Campaign:
             targets = dict.fromkeys([guess.via, *near])
             self._register([self._planned(pair_of(scan, t)) for t in targets])
             if self._settle(scan):
-                return False if hinted else None
+                return missed
         where[scan] = Placed(scan, np.eye(4))
-        return False if hinted else None
+        return missed
 
     def _settle(self, scan: int) -> bool:
         """Place the scan by its ok links to placed scans (:func:`_fit`); the groups its other

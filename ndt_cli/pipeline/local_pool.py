@@ -13,6 +13,7 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
+from ndt_cli.core.threads import Counter
 from ndt_cli.pipeline.workers import (
     Failure,
     Results,
@@ -26,10 +27,12 @@ from ndt_cli.pipeline.workers import (
 log = logging.getLogger(__name__)
 
 
-_busy: Any = None  # in a worker: the pool's count of workers running a task (shared cores)
+_busy: Counter | None = None  # in a worker: the pool's count of workers running a task
 
 
-def _init_worker(threads: int | None, busy: Any, init: Callable[[], None] | None) -> None:
+def _init_worker(
+    threads: int | None, busy: Counter | None, init: Callable[[], None] | None
+) -> None:
     global _busy
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is handled by the parent
     if busy is None:
