@@ -178,6 +178,8 @@ class Campaign:
             self.unreadable,
             matched(self.net.stations, names),
             self.net.grid_scale,
+            self.cfg.quality.max_ambiguity,
+            self.cfg.quality.trust_bridges,
         )
         _log_controls(solution)
         return ChainResult(
@@ -364,7 +366,8 @@ class Campaign:
 
     def _replan(self, where: list[dict[int, np.ndarray]]) -> set[Pair]:
         """The network's pairs from the positions of the groups of scans."""
-        radius = self.net.radius if self.net.radius is not None else default_radius(where)
+        factor = self.cfg.scene.radius_factor
+        radius = self.net.radius if self.net.radius is not None else default_radius(where, factor)
         self.radius = float(radius)
         failed = {p for p, k in self.links.items() if not k.ok}
         r = radius if np.isfinite(radius) else 0.0
