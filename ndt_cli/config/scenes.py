@@ -37,7 +37,7 @@ INDOOR: dict[str, Any] = {
     "quality.trust_bridges": False,
     # right poses of simulated interiors put at most 0.15 % of the points into free space, the
     # wrong ones that no rival named 0.6-4 % (a real robot's room scans put 2 % there: suspect)
-    "quality.max_free_space": 0.005,
+    "quality.max_free_space_around": 0.005,
 }
 
 

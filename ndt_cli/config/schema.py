@@ -278,12 +278,17 @@ class QualityConfig:
         "real scans 0.037-0.6; corridors and links slid along a street 0.001-0.013)",
     )
     max_free_space: float = key(
-        0.05,
+        0.10,
         "the share of points the final pose puts into space the other scanner saw empty, in "
-        "front of what it saw in the direction and those around it (right poses: simulated "
-        "streets and interiors up to 0.013, real scans up to 0.020; wrong poses that won on "
-        "evidence 0.04 and more); needs scans in their scanners' own frames (off with "
-        "search.free_space_ratio: 0)",
+        "front of what it saw in their direction (right poses: simulated streets up to 0.062, "
+        "real scans up to 0.091; wrong poses that passed every other check 0.113 and more); "
+        "needs scans in their scanners' own frames (off with search.free_space_ratio: 0)",
+    )
+    max_free_space_around: float = key(
+        0.05,
+        "the same share in front of all the other scanner saw around each direction (a ceiling "
+        "or a corridor wall seen at grazing angles puts right interior poses at 4-7 % of the "
+        "share above, 0-0.15 % of this one; right poses of real scans up to 2 %); indoors 0.005",
     )
     min_score_per_point: float = key(
         0.0,

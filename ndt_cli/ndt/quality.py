@@ -125,12 +125,14 @@ def icp_warnings(
 @dataclass(frozen=True)
 class Sights:
     """What the scanners saw of the pose: the share of points the final pose puts into space
-    the other scanner saw empty, and the second-best pose's (NaN when not measured), and why
-    the pose is not the one of most evidence ('' when it is)."""
+    the other scanner saw empty (in each direction's bin), the second candidate's (around each
+    direction; NaN when not measured), why the pose is not the one of most evidence ('' when it
+    is), and the final pose's share around each direction."""
 
     final: float = float("nan")
     second: float = float("nan")
     picked: str = ""
+    around: float = float("nan")  # the final pose's share around each direction
 
 
 @dataclass(frozen=True)
@@ -171,6 +173,12 @@ def verdict_of(
         warnings.append(
             f"free space: the pose puts {sights.final:.0%} of the points into space the other "
             f"scanner saw empty (> {q.max_free_space:.0%})"
+        )
+    if np.isfinite(sights.around) and sights.around > q.max_free_space_around:
+        contradicts = True
+        warnings.append(
+            f"free space: the pose puts {sights.around:.1%} of the points in front of all the "
+            f"other scanner saw around them (> {q.max_free_space_around:.1%})"
         )
     notes += [sights.picked] if sights.picked else []
     weak = weak if weak is not None else weak_icp

@@ -190,12 +190,15 @@ def _rivals(
 
 def _final_free_space(
     target: PreparedScan, source: PreparedScan, T: np.ndarray, cfg: Config
-) -> float:
-    """The free-space share of the final pose (NaN when the check is off or a scan cannot say
-    what it saw)."""
+) -> tuple[float, float]:
+    """The free-space shares of the final pose, in each direction's bin alone and around it
+    (NaN when the check is off or a scan cannot say what it saw)."""
     if cfg.search.free_space_ratio <= 0.0 or target.sight is None or source.sight is None:
-        return float("nan")
-    return free_space_share(target.sight, source.sight, T, margin(cfg.refine.voxel))
+        return float("nan"), float("nan")
+    gap = margin(cfg.refine.voxel)
+    return tuple(
+        free_space_share(target.sight, source.sight, T, gap, around) for around in (False, True)
+    )
 
 
 @dataclass(frozen=True)
@@ -250,7 +253,8 @@ def register_prepared(
     moved = _planar(target, source, refinement.T) if refinement.icp is not None else None
     after = None if moved is None else measure_fit(gate_map, gate_points, moved, 0.0, kernels)
     second = float(judged.shares[1]) if len(judged.shares) > 1 else float("nan")
-    sights = Sights(_final_free_space(target, source, refinement.T, cfg), second, judged.note)
+    final, around = _final_free_space(target, source, refinement.T, cfg)
+    sights = Sights(final, second, judged.note, around)
     verdict = verdict_of(fit, converged, refinement, target.level, cfg.quality, sights, rivals)
     per_slice = tuple(int(n) for n in sampler.fine.per_slice(len(source.slices)))
     stages = _Stages(
@@ -319,6 +323,7 @@ def _result(
         icp_centroid=None if icp is None else icp.centroid,
         T_ndt=s.refinement.start,
         free_space=s.sights.final,
+        free_space_around=s.sights.around,
         free_space_second=s.sights.second,
         score_per_point_final=s.score_final,
         notes=s.verdict.notes,

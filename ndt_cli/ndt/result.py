@@ -159,6 +159,8 @@ class RegistrationResult:
     free_space: float = float("nan")
     score_per_point_final: float = float("nan")
     free_space_second: float = float("nan")  # that of the second-best pose
+    free_space_around: float = float("nan")  # the final pose's, in front of all that was seen
+    # around each direction (ndt_cli.ndt.visibility)
     notes: tuple[str, ...] = field(default=())  # what the gate checked and let pass
     refuted: bool = False  # the data contradict the pose (ndt_cli.ndt.quality.verdict_of)
     # how each scan's vertical was found (ndt_cli.ndt.vertical.VerticalSource; "given": ground.z)
@@ -273,6 +275,7 @@ class RegistrationResult:
             "T_ndt": _list(self.T_ndt),
             "free_space": self.free_space,
             "free_space_second": self.free_space_second,
+            "free_space_around": self.free_space_around,
             "score_per_point_final": self.score_per_point_final,
             "notes": list(self.notes),
             "refuted": self.refuted,

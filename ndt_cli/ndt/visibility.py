@@ -18,13 +18,17 @@ of the same surface seen from elsewhere; an occlusion edge puts a near surface b
 in the same way. Only points more than :data:`MIN_HEIGHT` above the ground are checked: ground
 at grazing angles is the same problem where it is worst.
 
-Measured with the single-bin test: on simulated streets a right pose put 1-6 % of the checked
-points into free space (occlusion edges, the bins' width), the wrong poses NDT ranked first or
-second 10-39 %; on real pairs (Velodyne street and car scans) right poses 0.4-11 % and the
-runners-up 30-51 %. In simulated interiors right poses put 4-7 % there, nearly all of it the
-ceiling seen at grazing angles from far along a corridor, as many as the wrong poses turned by
-180 degrees or slid by a room: the neighbourhood test puts right interior poses at 0.0 % and
-leaves the wrong ones at 0.2-10 %. Figures of today's test: docs/trust.md.
+Two shares are measured. *In the bin alone*: on simulated streets a right pose puts 1-6 % of
+the checked points into free space (occlusion edges, the bins' width), the wrong poses NDT
+ranked first or second 10-39 %; on real pairs (Velodyne street and car scans) right poses
+0.4-11 % and the runners-up 30-51 %; this share gates a street's final pose
+(``quality.max_free_space``). In simulated interiors it puts right poses at 4-7 %, nearly all
+of it the ceiling seen at grazing angles from far along a corridor, as many as the wrong poses
+turned by 180 degrees or slid by a room. *Around it* (the neighbourhood test): right interior
+poses put 0-0.15 % there and the wrong ones 0.2-10 %; this share compares candidates with each
+other (:mod:`ndt_cli.ndt.rivals`) and gates an interior's final pose
+(``quality.max_free_space_around``). On a street it forgives a wrong pose too much (a scan of
+another street: 2.6 % around, 20 % in the bin alone). Figures: docs/trust.md.
 """
 
 from __future__ import annotations
@@ -65,12 +69,14 @@ class RangeImage:
         np.minimum.at(ranges, _bins(points, r, n_az, n_el), r)
         return cls(ranges, n_az, n_el, _guard(ranges.reshape(n_az, n_el)).ravel())
 
-    def conflicts(self, points: np.ndarray, margin: float = MARGIN) -> tuple[int, int]:
-        """(points more than ``margin`` m in front of the surfaces seen in their direction bin
-        and the bins around it, points whose direction was measured) of (N,3) points in this
-        scanner's frame (m)."""
+    def conflicts(
+        self, points: np.ndarray, margin: float = MARGIN, around: bool = True
+    ) -> tuple[int, int]:
+        """(points more than ``margin`` m in front of the surfaces seen in their direction bin,
+        and in the bins around it when ``around``, points whose direction was measured) of (N,3)
+        points in this scanner's frame (m)."""
         r = _ranges(points)
-        seen = self.guard[_bins(points, r, self.n_az, self.n_el)]
+        seen = (self.guard if around else self.ranges)[_bins(points, r, self.n_az, self.n_el)]
         measured = np.isfinite(seen)
         return int((measured & (r < seen - margin)).sum()), int(measured.sum())
 
@@ -146,11 +152,17 @@ def margin(voxel: float) -> float:
 
 
 def free_space_share(
-    target: Sight, source: Sight, T_target_source: np.ndarray, margin: float = MARGIN
+    target: Sight,
+    source: Sight,
+    T_target_source: np.ndarray,
+    margin: float = MARGIN,
+    around: bool = True,
 ) -> float:
     """Share of the checked points of both scans that a pose puts into the other scanner's
-    free space (0-1); ``T_target_source`` maps the source scanner's frame to the target's."""
+    free space (0-1); ``T_target_source`` maps the source scanner's frame to the target's.
+    ``around``: in front of what was seen in the direction and around it (see the module
+    docstring); false: in the direction's bin alone."""
     R, t = T_target_source[:3, :3], T_target_source[:3, 3]
-    bad_s, seen_s = target.image.conflicts(source.checked @ R.T + t, margin)
-    bad_t, seen_t = source.image.conflicts((target.checked - t) @ R, margin)
+    bad_s, seen_s = target.image.conflicts(source.checked @ R.T + t, margin, around)
+    bad_t, seen_t = source.image.conflicts((target.checked - t) @ R, margin, around)
     return (bad_s + bad_t) / max(seen_s + seen_t, 1)
