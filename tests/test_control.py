@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from test_adjust import CHAIN, SKIPS, measured, rot
@@ -9,7 +11,12 @@ from test_adjust import CHAIN, SKIPS, measured, rot
 from ndt_cli.core.transforms import rotation4, transform_errors
 from ndt_cli.errors import InputError
 from ndt_cli.pipeline.adjust import Solver
-from ndt_cli.pipeline.control import DEFAULT_SIGMA_XY, DEFAULT_SIGMA_Z, Control, read_control
+from ndt_cli.pipeline.control import (
+    DEFAULT_SIGMA_XY,
+    DEFAULT_SIGMA_Z,
+    Control,
+    read_control,
+)
 from ndt_cli.pipeline.datum import Cluster, datum
 
 NAMES = ("north/scan_0.laz", "scan_1.laz", "campaign.e57#2")
@@ -27,7 +34,7 @@ def test_a_control_file_names_scans_as_the_outputs_do(tmp_path):
         "# GNSS on the scanner\n"
         "north/scan_0.laz,500000.125,5400000.5,101.25,0.01,0.015\n"
         "scan_1.laz, 500030.0 , 5400001.0, 102.0,,\n"
-        "campaign.e57#2,500060,5400002,103\n"
+        "campaign.e57#2,500060,5400002,103,,\n"
     )
     got = read_control(_file(tmp_path, text), NAMES)
     assert [c.scan for c in got] == [0, 1, 2]
@@ -46,10 +53,9 @@ def test_a_control_file_names_scans_as_the_outputs_do(tmp_path):
         ("scan,x,y,z\nscan_1.laz,1,nan,3\n", "line 2: y is not finite"),
         ("scan_1.laz,1,2,3,0,0.1\n", "line 1: standard deviations must be positive"),
         ("scan_1.laz,1,2,3\nscan_1.laz,1,2,3\n", "line 2: scan 'scan_1.laz' is given twice"),
-        ("scan_1.laz,1,2\n", "line 1: expected 'scan,x,y,z'"),
+        ("scan_1.laz,1,2\n", "line 1: 3 fields; expected 'scan,x,y,z'"),
         ("scan_1.laz,1,2,east\n", "line 1: z 'east' is not a number"),
         ("# nothing\n", "no station in the control file"),
-        ("\ufeffscan_1.laz,1,2,3\n", "no scan named"),  # a BOM is not silently a header
     ],
 )
 def test_every_problem_of_a_control_file_is_one_line_naming_it(tmp_path, text, needle):
@@ -159,3 +165,62 @@ def test_scans_near_by_known_positions_are_candidates_within_radius_and_sigmas()
     assert near_by_position(0, positions, [1, 2, 3], 25.0, 5) == [2, 3]
     assert near_by_position(0, positions, [1, 2, 3, 4], 25.0, 2) == [4, 2]
     assert near_by_position(5, positions, [0, 1], 25.0, 2) == []  # no position of its own
+
+
+def test_excel_csv_utf8_with_its_byte_order_mark_and_crlf_is_read(tmp_path):
+    """Excel's "CSV UTF-8" starts with a byte-order mark and ends lines with CR LF."""
+    p = tmp_path / "control.csv"
+    rows = "scan,x,y,z,sigma_xy,sigma_z\r\nscan_1.laz,500030.5,5400001.25,102.0,0.01,\r\n"
+    p.write_bytes(b"\xef\xbb\xbf" + rows.encode())
+    got = read_control(p, NAMES)
+    assert [c.scan for c in got] == [1]
+    np.testing.assert_array_equal(got[0].xyz, [500030.5, 5400001.25, 102.0])
+    assert (got[0].sigma_xy, got[0].sigma_z) == (0.01, DEFAULT_SIGMA_Z)
+
+
+HEADER = "scan,x,y,z,sigma_xy,sigma_z\n"
+
+
+@pytest.mark.parametrize(
+    ("text", "needle"),
+    [
+        (  # a decimal comma splits a coordinate in two: seven fields
+            HEADER + "scan_1.laz,500184,9872,5400001.5,102.0,,\n",
+            "line 2: 7 fields where the header has 6 (a decimal comma? write 500184.9872)",
+        ),
+        (HEADER + "scan_1.laz,500184.98,5400001.5,102.0\n", "line 2: 4 fields where the header"),
+        (
+            "scan_1.laz;500184,98;5400001,5;102,0\n",
+            "line 1: fields separated by semicolons: separate them with commas",
+        ),
+        (  # northing and height swapped: a height in the millions
+            "scan_1.laz,500184.98,102.0,5400001.5\n",
+            "line 1: column z: 5,400,001.500 m is no height",
+        ),
+        ("scan_1.laz,1e300,1e300,1e300\n", "line 1: column x: 1e+300 m is no coordinate"),
+        ("scan_1.laz,1,2,3,1e300,1e300\n", "line 1: sigma_xy 1e+300 m is out of range"),
+        ("scan_1.laz,1,2,3,0.01,1e-300\n", "line 1: sigma_z 1e-300 m is out of range"),
+        (",1,2,3\n", "line 1: no scan named (the first field is empty)"),
+        (HEADER.replace("\n", ",extra\n") + "scan_1.laz,1,2,3,,,\n", "line 1: a header must"),
+        ("name,easting,northing,height\nscan_1.laz,1,2,3\n", "line 1: a header must read"),
+    ],
+)
+def test_a_row_that_cannot_be_read_as_written_is_one_line_naming_it(tmp_path, text, needle):
+    with pytest.raises(InputError, match=re.escape(needle)) as err:
+        read_control(_file(tmp_path, text), NAMES)
+    assert "control.csv" in str(err.value) and "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize(
+    ("row", "needle"),
+    [
+        ("scan.laz,1,2,3", "'scan.laz' names 2 scans (north/scan.laz, south/scan.laz)"),
+        ("street.e57,1,2,3", "line 1: 'street.e57' holds 3 scans: name one as street.e57#0"),
+    ],
+)
+def test_a_name_that_several_scans_share_is_an_error_not_the_last_of_them(tmp_path, row, needle):
+    names = ("north/scan.laz", "south/scan.laz", "street.e57#0", "street.e57#1", "street.e57#2")
+    with pytest.raises(InputError, match=re.escape(needle)):
+        read_control(_file(tmp_path, row + "\n"), names)
+    exact = read_control(_file(tmp_path, "south/scan.laz,1,2,3\nstreet.e57#0,4,5,6\n"), names)
+    assert [c.scan for c in exact] == [1, 2]
