@@ -41,7 +41,6 @@ from ndt_cli.ndt.overlap import COARSE_WINDOW, CoarseMatch, coarse_match
 from ndt_cli.ndt.prepare import PreparedScan
 from ndt_cli.ndt.result import Status
 from ndt_cli.pipeline.control import Station, matched
-from ndt_cli.pipeline.datum import WorldFrame
 from ndt_cli.pipeline.discovery import (
     HINTS,
     Placed,
@@ -191,10 +190,10 @@ class Campaign:
         )
 
     def _world_system(self, solution: NetworkSolution) -> dict[str, Any]:
-        """The coordinate system of the world and its scale, when control made the world."""
-        if solution.datum is None or solution.datum.frame is not WorldFrame.CONTROL:
-            return {}
-        return {"crs": self.net.crs, "grid_scale": self.net.grid_scale}
+        """The control's stations and coordinate system, and the grid scale when applied."""
+        applied = solution.datum is not None and solution.datum.frame.from_control
+        scale = self.net.grid_scale if applied else 1.0
+        return {"stations": self.net.stations, "crs": self.net.crs, "grid_scale": scale}
 
     def report(self, index: int, result: ChainResult) -> ScanReport:
         """What the network made of scan ``index`` in ``result``."""

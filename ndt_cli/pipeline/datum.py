@@ -16,12 +16,16 @@ its coordinates; its heading stays the anchor's (one point cannot give it).
 With two or more stations the control enters the adjustment: each station is a prior on its
 scan's position (a GTSAM ``GPSFactor`` with its standard deviations, under a Huber kernel),
 each scan's vertical a prior on its tilt, the kept links between factors as before, and nothing
-else holds the frame. A station whose misfit exceeds its standard deviations (chi-square,
-3 DOF, p = 0.999) is rejected, worst first, and the network solved again: a wrong point number
-or a GNSS fix off by decimetres does not bend the network. With two stations left that
-disagree, which one is wrong cannot be told: both are rejected. The world is then the control's
-coordinate system (the graph works in it less the stations' mean, rounded, so that its numbers
-stay small).
+else holds the frame. The adjustment starts from the largest group of stations that agree with
+one placement of the levelled network (:mod:`ndt_cli.pipeline.consensus`): two stations with
+swapped numbers among five do not turn it onto them; two groups as large leave it unplaced. A
+station whose misfit exceeds its standard deviations (chi-square, 3 DOF, p = 0.999) is
+rejected, worst first, and the network solved again: a wrong point number or a GNSS fix off by
+decimetres does not bend the network; one outside the group within the bound is taken in. With
+two stations left that disagree, which one is wrong cannot be told: both are rejected. The
+world is then the control's coordinate system (the graph works in it less the stations' mean,
+rounded, so that its numbers stay small). Stations that cannot place the network leave it
+levelled, and :func:`not_georeferenced` says why.
 
 A map projection's coordinates are not at ground scale: UTM shrinks distances by 0.9996 on the
 central meridian (40 cm per km), heights above the ellipsoid add R / (R + h). With the
