@@ -357,3 +357,30 @@ def test_the_campaign_is_not_georeferenced_when_fewer_than_two_stations_are_in_u
     why = not_georeferenced(one, typo, names)
     assert why == ("1 of 2 control station(s) in use, 2 needed: line 7: no scan named 's_9'")
     assert "the anchor has no link yet" in not_georeferenced(None, typo, names)
+
+
+@pytest.mark.parametrize(
+    ("blunders", "georeferenced"),
+    [
+        ({7: [5.0, 0.0, 0.0]}, True),  # two right, one 5 m off: the two place the street
+        ({0: [5.0, 0.0, 0.0], 5: [0.0, -7.0, 0.0], 7: [-4.0, 6.0, 0.0]}, False),  # 2 of 5 agree
+    ],
+)
+def test_the_stations_that_agree_must_be_the_majority(blunders, georeferenced):
+    rng = np.random.default_rng(10)
+    truth = _sloped_street(rng, grade=0.0)
+    crs = _in_crs(truth)
+    cluster, solver, kept = _network(rng, truth)
+    scans = (2, 4, 7) if len(blunders) == 1 else (0, 2, 4, 5, 7)
+    stations = [Control(k, f"s{k}", crs[k][:3, 3] + blunders.get(k, 0.0)) for k in scans]
+    world = datum(cluster, stations, solver, kept)
+    used = {f.control.name for f in world.controls if f.used}
+    if georeferenced:
+        assert world.frame == "control" and used == {"s2", "s4"}
+        assert all(transform_errors(T, crs[k])[1] < 0.03 for k, T in world.poses.items())
+    else:
+        assert world.frame == "levelled" and not used
+        assert world.problem == (
+            "only 2 of the 5 stations agree with one placement of the network (s2, s4): not a "
+            "majority, which are right cannot be told"
+        )

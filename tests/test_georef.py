@@ -217,3 +217,20 @@ def test_the_grid_scale_is_utms_point_scale_times_the_height_reduction(easting):
     got = grid_scale(crs_wkt("EPSG:25832"), np.array([easting, 5_400_000.0, h]))
     assert abs(got - expected) < 1e-6
     assert grid_scale(crs_wkt("EPSG:25832+5783"), np.array([easting, 5_400_000.0, h])) == got
+
+
+def test_a_station_named_by_a_file_name_two_folders_share_is_refused(tmp_path):
+    """north/scan.xyz and south/scan.xyz: 'scan.xyz' names neither (the last one used to be
+    taken, silently); the outputs' names do."""
+    files = []
+    for side in ("north", "south"):
+        (tmp_path / side).mkdir()
+        files.append(tmp_path / side / "scan.xyz")
+        files[-1].write_text("0 0 0\n1 0 0\n0 1 0\n")
+    (tmp_path / "control.csv").write_text("scan.xyz,1,2,3\n")
+    args = [*map(str, files), "--out", str(tmp_path / "out"), "--control"]
+    res = runner.invoke(chain_app, [*args, str(tmp_path / "control.csv")])
+    assert res.exit_code == EXIT_INPUT, res.output
+    needle = "line 1: 'scan.xyz' names 2 scans (north/scan.xyz, south/scan.xyz): name one as"
+    assert needle in res.output and len(res.output.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()

@@ -10,8 +10,11 @@ own error (:data:`NET_XY_M` + :data:`NET_XY_PER_M` of the distance; heights like
 the placement puts its scanner. These bounds catch a wrong point number, swapped stations or a
 fix metres off; what is finer is left to the adjustment's chi-square test.
 
-The largest group wins; a group as large that shares fewer than two stations with it places the
-network elsewhere, and which of the two is right cannot be told (two stations against two).
+The largest group wins when it is a majority of the stations; a group as large that shares
+fewer than two stations with it places the network elsewhere, and which of the two is right
+cannot be told (two stations against two). Three stations of which two have swapped numbers
+look like two right ones and a blunder (a turn by 180 degrees about the two); with four, two
+against two are refused; with five, the three right ones win.
 """
 
 from __future__ import annotations

@@ -183,13 +183,25 @@ def read_stations(path: str | Path) -> tuple[Station, ...]:
     return tuple(out)
 
 
-def _scan_of(name: str, names: Sequence[str]) -> int | str:
+Lookup = tuple[dict[str, int], dict[str, list[int]]]
+
+
+def _lookup(names: Sequence[str]) -> Lookup:
+    """The scans by the names the outputs give them, and by their files' names."""
+    by_file: dict[str, list[int]] = {}
+    for k, n in enumerate(names):
+        by_file.setdefault(Path(n.split("#")[0]).name, []).append(k)
+    return {n: k for k, n in enumerate(names)}, by_file
+
+
+def _scan_of(name: str, names: Sequence[str], lookup: Lookup) -> int | str:
     """The index of the scan a station names (as the outputs name it, or by its file's name),
     or why none: no scan has that name, or several have (a file of several scans, files of one
     name in several folders)."""
-    if name in names:
-        return names.index(name)
-    hits = [k for k, n in enumerate(names) if Path(n.split("#")[0]).name == name]
+    exact, by_file = lookup
+    if name in exact:
+        return exact[name]
+    hits = by_file.get(name, [])
     if len(hits) == 1:
         return hits[0]
     if not hits:
@@ -207,9 +219,10 @@ def matched(
     a scan's file name counts too when no other scan has it). With ``path``, a station naming
     no scan, or several, is an error naming its line; without, it waits (field mode: its scan
     has not landed yet; :func:`unmatched` says why)."""
-    out = []
+    out: list[Control] = []
+    lookup = _lookup(names)
     for s in stations:
-        k = _scan_of(s.name, names)
+        k = _scan_of(s.name, names, lookup)
         if isinstance(k, str):
             if path is not None:
                 raise InputError(f"line {s.line}: {k}", path)
@@ -222,7 +235,8 @@ def matched(
 
 def unmatched(stations: Sequence[Station], names: Sequence[str]) -> tuple[tuple[Station, str], ...]:
     """The stations naming no scan of ``names`` (or several), each with why."""
-    found = ((s, _scan_of(s.name, names)) for s in stations)
+    lookup = _lookup(names)
+    found = ((s, _scan_of(s.name, names, lookup)) for s in stations)
     return tuple((s, k) for s, k in found if isinstance(k, str))
 
 

@@ -45,7 +45,7 @@ import numpy as np
 
 from ndt_cli.core.transforms import levelling_rotation, rotation4, translation
 from ndt_cli.pipeline.adjust import Solver
-from ndt_cli.pipeline.consensus import largest_group, likely_cause
+from ndt_cli.pipeline.consensus import Group, largest_group, likely_cause
 from ndt_cli.pipeline.control import Control, Station, unmatched
 
 VERTICAL_SIGMA_DEG = {  # how well each way of finding a scan's vertical finds it (1 sigma)
@@ -233,30 +233,10 @@ def _controlled(
     s_xy = np.array([c.sigma_xy for c in stations])
     s_z = np.array([c.sigma_z for c in stations])
     group = largest_group(p, q, s_xy, s_z)
-    if len(group.members) < len(stations):  # more of them fitting it mirrored or scaled?
-        cause = likely_cause(p, q, s_xy, s_z, len(group.members))
-        if cause:
-            why = "the stations fit the network only if changed"
-            n = f"{len(group.members)} of the {len(stations)} stations"
-            return (
-                None,
-                f"{n} agree with the network as given, {cause}",
-                dict.fromkeys((c.scan for c in stations), why),
-            )
-    if group.rivals:
-        a, b = ([stations[k].name for k in g] for g in (group.members, group.rivals))
-        why = f"in one of two groups, {len(a)} against {len(b)}: which is right cannot be told"
-        return (
-            None,
-            (
-                f"the stations form groups that place the network differently, {len(a)} against "
-                f"{len(b)} ({', '.join(a)} | {', '.join(b)}): which is right cannot be told"
-            ),
-            {c.scan: why for c in stations},
-        )
-    if len(group.members) < 2:
-        why = "agrees with no other station"
-        return None, _no_two_agree(p, q), {c.scan: why for c in stations}
+    unplaced = _why_unplaced(group, [c.name for c in stations], p, q, s_xy, s_z)
+    if unplaced is not None:
+        problem, why = unplaced
+        return None, problem, dict.fromkeys((c.scan for c in stations), why)
     members = [stations[k] for k in group.members]
     others = [c for k, c in enumerate(stations) if k not in group.members]
     adjusted = _with_control(cluster, levelled, members, others, solver, kept)
@@ -264,6 +244,43 @@ def _controlled(
         why = "the two stations left disagree beyond their standard deviations"
         return None, f"{why}: which is wrong cannot be told", {c.scan: why for c in stations}
     return adjusted, "", {}
+
+
+def _why_unplaced(
+    group: Group,
+    names: Sequence[str],
+    p: np.ndarray,
+    q: np.ndarray,
+    s_xy: np.ndarray,
+    s_z: np.ndarray,
+) -> tuple[str, str] | None:
+    """Why the largest ``group`` of the stations ``names`` cannot place the network (arguments
+    of :func:`~ndt_cli.pipeline.consensus.largest_group`), and what each station is told; None
+    when it can: most stations agree, and no group as large places it elsewhere."""
+    n, k = len(names), len(group.members)
+    cause = likely_cause(p, q, s_xy, s_z, k) if k < n else ""
+    if cause:
+        return (
+            f"{k} of the {n} stations agree with the network as given, {cause}",
+            "the stations fit the network only if changed",
+        )
+    if group.rivals:
+        a, b = (", ".join(names[i] for i in g) for g in (group.members, group.rivals))
+        return (
+            f"the stations form groups that place the network differently, {k} against "
+            f"{len(group.rivals)} ({a} | {b}): which is right cannot be told",
+            f"in one of two groups, {k} against {len(group.rivals)}: which is right cannot be told",
+        )
+    if k < 2:
+        return _no_two_agree(p, q), "agrees with no other station"
+    if 2 * k <= n:
+        agree = ", ".join(names[i] for i in group.members)
+        return (
+            f"only {k} of the {n} stations agree with one placement of the network ({agree}): "
+            "not a majority, which are right cannot be told",
+            "the stations that agree are not the majority",
+        )
+    return None
 
 
 def _no_two_agree(p: np.ndarray, q: np.ndarray) -> str:
