@@ -210,6 +210,8 @@ HEADER = "scan,x,y,z,sigma_xy,sigma_z\n"
         (",1,2,3\n", "line 1: no scan named (the first field is empty)"),
         (HEADER.replace("\n", ",extra\n") + "scan_1.laz,1,2,3,,,\n", "line 1: a header must"),
         ("name,easting,northing,height\nscan_1.laz,1,2,3\n", "line 1: a header must read"),
+        ("scan_1.laz\t1\t2\t3\n", "line 1: fields separated by tabs"),
+        (HEADER + "scan_1.laz,1,2,3,,\n" + HEADER, "line 3: a header again (two files joined?)"),
     ],
 )
 def test_a_row_that_cannot_be_read_as_written_is_one_line_naming_it(tmp_path, text, needle):

@@ -91,6 +91,12 @@ HEADER = "scan,x,y,z,sigma_xy,sigma_z\n"
             "line 1: column z: 5,399,975.249 m is no height",
         ),
         (UTM, "EPSG:2056", "line 1: x, y (499959.527, 5399975.249) lie outside the area of "),
+        (  # a German habit: the zone number before the easting
+            "scan_0.xyz,32499959.5266,5399975.2489,101.6,,\n",
+            "EPSG:25832",
+            "inside it as 499959.527: the easting carries a zone number (32)? give it without",
+        ),
+        ("scan_0.xyz,9.0,48.75,400\n", "EPSG:25832", "degrees of longitude and latitude?"),
         (UTM, "EPSG:31467", "DHDN / 3-degree Gauss-Kruger zone 3 (EPSG:31467): at 27.44°W"),
         (UTM, "EPSG:5514", "S-JTSK / Krovak East North (EPSG:5514): at 29.20°E 73.44°N, not in"),
         (UTM, "EPSG:4978", "--crs 'EPSG:4978' is geocentric"),

@@ -111,7 +111,7 @@ def likely_cause(
         if (d := np.linalg.norm(p[j, :2] - p[i, :2])) > MIN_SCALE_BASE_M
     ]
     r = float(np.median(ratios)) if ratios else 1.0
-    if abs(r - 1.0) <= SCALE_TOLERANCE:
+    if not 1e-3 < r < 1e3 or abs(r - 1.0) <= SCALE_TOLERANCE:
         return ""
     centre = q.mean(axis=0)
     scaled = len(largest_group(p, centre + (q - centre) / r, s_xy, s_z).members)

@@ -125,7 +125,7 @@ def _is_number(cell: str) -> bool:
 def _header(cells: list[str]) -> tuple[str, ...] | None:
     """The column names of a header row (a ValueError unless they are the columns, in order);
     None when the row holds a station (a coordinate of it is a number)."""
-    if any(_is_number(c) for c in cells[1:4]):
+    if len(cells) < 4 or any(_is_number(c) for c in cells[1:4]):
         return None
     names = tuple(c.lower() for c in cells)
     if names not in (COLUMNS[:4], COLUMNS[:5], COLUMNS):
@@ -136,9 +136,12 @@ def _header(cells: list[str]) -> tuple[str, ...] | None:
 def _length(cells: list[str], header: tuple[str, ...] | None) -> None:
     """A ValueError unless the row has as many fields as the header (without one: 4 to 6),
     with the likely cause: decimal commas, semicolons."""
-    first = cells[0].split(";")
-    if len(first) > 1 and _is_number(first[1].replace(",", ".")):
-        raise ValueError("fields separated by semicolons: separate them with commas")
+    for sep, what in ((";", "semicolons"), ("\t", "tabs")):
+        first = cells[0].split(sep)
+        if len(first) > 1 and _is_number(first[1].replace(",", ".")):
+            raise ValueError(f"fields separated by {what}: separate them with commas")
+    if tuple(c.lower() for c in cells[:4]) == COLUMNS[:4]:
+        raise ValueError("a header again (two files joined?): a header is the first row only")
     allowed = (len(header),) if header else (4, 5, 6)
     if len(cells) in allowed:
         return
@@ -154,7 +157,8 @@ def _length(cells: list[str], header: tuple[str, ...] | None) -> None:
             (f"{a}.{b}" for a, b in pairs if re.fullmatch(r"[-+]?\d+", a) and b.isdigit()), None
         )
         hint = f" (a decimal comma? write {comma})" if comma else ""
-    raise ValueError(f"{len(cells)} fields{expected}{hint}")
+    fields = "1 field" if len(cells) == 1 else f"{len(cells)} fields"
+    raise ValueError(f"{fields}{expected}{hint}")
 
 
 def read_stations(path: str | Path) -> tuple[Station, ...]:
@@ -163,6 +167,7 @@ def read_stations(path: str | Path) -> tuple[Station, ...]:
     p = Path(path)
     text = read_user_text(p, "control").removeprefix("\ufeff")
     out: list[Station] = []
+    seen: set[str] = set()
     header: tuple[str, ...] | None = None
     for number, raw in enumerate(text.splitlines(), 1):
         cells = [c.strip() for c in next(csv.reader([raw]), [])]
@@ -175,8 +180,9 @@ def read_stations(path: str | Path) -> tuple[Station, ...]:
             station = _row(cells, number)
         except ValueError as exc:
             raise InputError(f"line {number}: {exc}", p) from None
-        if any(s.name == station.name for s in out):
+        if station.name in seen:
             raise InputError(f"line {number}: scan {station.name!r} is given twice", p)
+        seen.add(station.name)
         out.append(station)
     if not out:
         raise InputError("no station in the control file", p)
@@ -219,7 +225,7 @@ def matched(
     a scan's file name counts too when no other scan has it). With ``path``, a station naming
     no scan, or several, is an error naming its line; without, it waits (field mode: its scan
     has not landed yet; :func:`unmatched` says why)."""
-    out: list[Control] = []
+    out: dict[int, Control] = {}
     lookup = _lookup(names)
     for s in stations:
         k = _scan_of(s.name, names, lookup)
@@ -227,10 +233,10 @@ def matched(
             if path is not None:
                 raise InputError(f"line {s.line}: {k}", path)
             continue
-        if any(c.scan == k for c in out):
+        if k in out:
             raise InputError(f"line {s.line}: scan {s.name!r} is given twice", path)
-        out.append(Control(k, names[k], s.xyz, s.sigma_xy, s.sigma_z))
-    return tuple(out)
+        out[k] = Control(k, names[k], s.xyz, s.sigma_xy, s.sigma_z)
+    return tuple(out.values())
 
 
 def unmatched(stations: Sequence[Station], names: Sequence[str]) -> tuple[tuple[Station, str], ...]:
@@ -246,6 +252,31 @@ def read_control(path: str | Path, names: Sequence[str]) -> tuple[Control, ...]:
     return matched(read_stations(path), names, Path(path))
 
 
+def _outside(s: Station, wkt: str, area: Area) -> str:
+    """Why station ``s`` lies outside the ``area`` of use of ``wkt`` ('' when it does not):
+    with x and y swapped, or without a zone number before its easting, it would lie inside."""
+    x, y = float(s.xyz[0]), float(s.xyz[1])
+    lon, lat = geographic(wkt, x, y)
+    if area.holds(lon, lat):
+        return ""
+    where = f"line {s.line}: x, y ({x:.3f}, {y:.3f}) lie outside the area of {area.name}"
+    if area.holds(*geographic(wkt, y, x)):
+        return (
+            f"{where}, and inside it with columns x and y swapped: give the easting first, "
+            "then the northing"
+        )
+    if x > 1e6 and area.holds(*geographic(wkt, x % 1e6, y)):
+        return (
+            f"{where}, and inside it as {x % 1e6:.3f}: the easting carries a zone number "
+            f"({x // 1e6:.0f})? give it without"
+        )
+    if abs(x) <= 180 and abs(y) <= 90:
+        return f"{where}: degrees of longitude and latitude? give the system's eastings, northings"
+    d = Area.degrees
+    at = f"at {d(lon, 'EW')} {d(lat, 'NS')}, " if np.isfinite([lon, lat]).all() else ""
+    return f"{where}: {at}not in {area}; coordinates of another system?"
+
+
 def check_in_system(stations: Sequence[Station], wkt: str, value: str, path: Path) -> float:
     """The stations checked against their coordinate system ``wkt`` (``--crs`` ``value``; the
     control file ``path``): the system holds control (:func:`~ndt_cli.io.crs.check_system`),
@@ -255,23 +286,8 @@ def check_in_system(stations: Sequence[Station], wkt: str, value: str, path: Pat
     check_system(wkt, value)
     area = area_of_use(wkt)
     for s in stations if area is not None else ():
-        x, y = float(s.xyz[0]), float(s.xyz[1])
-        lon, lat = geographic(wkt, x, y)
-        if area.holds(lon, lat):
-            continue
-        where = f"line {s.line}: x, y ({x:.3f}, {y:.3f}) lie outside the area of {area.name}"
-        if area.holds(*geographic(wkt, y, x)):
-            raise InputError(
-                f"{where}, and inside it with columns x and y swapped: give the easting "
-                "first, then the northing",
-                path,
-            )
-        at = (
-            f"at {Area.degrees(lon, 'EW')} {Area.degrees(lat, 'NS')}, "
-            if np.isfinite([lon, lat]).all()
-            else ""
-        )
-        raise InputError(f"{where}: {at}not in {area}; coordinates of another system?", path)
+        if problem := _outside(s, wkt, area):
+            raise InputError(problem, path)
     scale = grid_scale(wkt, np.mean([s.xyz for s in stations], axis=0))
     if not abs(scale - 1.0) <= MAX_GRID_DISTORTION:
         raise ConfigError(
