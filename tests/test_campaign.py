@@ -21,11 +21,9 @@ from ndt_cli.config import Config
 from ndt_cli.core.transforms import transform_errors
 from ndt_cli.errors import ConfigError, InputError
 from ndt_cli.io.matrices import read_pose_list
-from ndt_cli.pipeline import campaign as campaign_module
-from ndt_cli.pipeline.campaign import Campaign
+from ndt_cli.pipeline import placement
 from ndt_cli.pipeline.chain import run_chain
 from ndt_cli.pipeline.inputs import anchor_index, chain_inputs
-from ndt_cli.pipeline.local_pool import WorkerPool
 from ndt_cli.pipeline.network import LinkKind, PlannedLink
 from ndt_cli.pipeline.verify import NodeStatus
 
@@ -219,20 +217,15 @@ def test_a_junction_side_streets_and_a_loop_are_all_ok_without_pairs(tmp_path):
     )
 
 
-def test_a_group_s_edge_is_its_scans_with_the_fewest_ok_links_within_it(tmp_path):
+def test_a_group_s_edge_is_its_scans_with_the_fewest_ok_links_within_it():
     """A line of 12 scans linked to their neighbours: the two ends (one ok link each) come
     first; a group no larger than the bound is all edge."""
-    campaign = Campaign(Config(), tmp_path / "out", WorkerPool(1))
-    try:
-        line = list(range(12))
-        for a in line[:-1]:
-            campaign.links[(a, a + 1)] = SimpleNamespace(ok=True)
-        campaign.links[(3, 5)] = SimpleNamespace(ok=False)  # not ok: does not count
-        edge = campaign._edge(line)
-        assert len(edge) == campaign_module.BRIDGE_MEMBERS and edge[:2] == [0, 11]
-        assert campaign._edge(line[:5]) == line[:5]
-    finally:
-        campaign.close()
+    line = list(range(12))
+    links = {(a, a + 1): SimpleNamespace(ok=True) for a in line[:-1]}
+    links[(3, 5)] = SimpleNamespace(ok=False)  # not ok: does not count
+    edge = placement.edge(line, links)
+    assert len(edge) == placement.BRIDGE_MEMBERS and edge[:2] == [0, 11]
+    assert placement.edge(line[:5], links) == line[:5]
 
 
 @pytest.mark.parametrize(

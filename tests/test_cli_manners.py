@@ -107,7 +107,7 @@ def test_the_shipped_default_config_is_the_printed_defaults():
 
 def test_the_surveyor_keys_are_named_and_the_rest_are_internals():
     text = " ".join(commented_yaml(Config()).replace("# ", "").split())
-    assert "Keys a surveyor sets: input.scale, input.axes" in text
+    assert "Keys a surveyor sets: scene.kind, input.scale, input.axes" in text
     assert "slices.heights" in text.split("Every other key")[0]
     assert "method internal" in text
 

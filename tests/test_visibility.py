@@ -21,7 +21,6 @@ from ndt_cli.ndt.visibility import (
     Sight,
     free_space_share,
     margin,
-    prefer,
     scanner_inside,
 )
 
@@ -121,23 +120,6 @@ def test_the_origin_must_lie_inside_the_scan():
     assert not scanner_inside(sector + np.array([5.0, 0.0, 0.0]))  # 5 m beyond its edge
 
 
-@pytest.mark.parametrize(
-    ("shares", "ratio", "floor", "kept"),
-    [
-        ([0.24, 0.04], 2.0, 0.08, 1),
-        ([0.24, 0.13], 2.0, 0.08, 0),  # not twice the second's
-        ([0.06, 0.02], 2.0, 0.08, 0),  # below the floor: both are plausible
-        ([0.24, 0.04], 0.0, 0.08, 0),  # switched off
-        ([0.24], 2.0, 0.08, 0),  # alone
-        ([0.16, 0.08], 2.0, 0.08, 0),  # exactly twice: not more
-        ([0.08, 0.01], 2.0, 0.08, 1),  # exactly at the floor
-        ([0.0, 0.0], 1.0, 0.0, 0),  # nothing in free space: a tie keeps the first
-    ],
-)
-def test_the_second_pose_is_kept_only_when_the_first_clearly_conflicts(shares, ratio, floor, kept):
-    assert prefer(np.array(shares), ratio, floor) == kept
-
-
 def test_promoting_a_candidate_keeps_the_ambiguity_below_one():
     ranked = Ranked(
         np.arange(9.0).reshape(3, 3),
@@ -208,3 +190,50 @@ def _shift(offset: np.ndarray) -> np.ndarray:
     T = np.eye(4)
     T[:3, 3] = offset
     return T
+
+
+def _ceiling_scan(height: float, reach: float, step_deg: float = 0.5) -> np.ndarray:
+    """Points a scanner at the origin measures on a ceiling ``height`` m above it, out to
+    ``reach`` m horizontally: rays on a regular grid of azimuths and elevations."""
+    az = np.radians(np.arange(0.0, 360.0, step_deg))
+    el = np.radians(np.arange(step_deg, 90.0, step_deg))
+    a, e = (g.ravel() for g in np.meshgrid(az, el))
+    r = height / np.sin(e)
+    keep = r * np.cos(e) < reach
+    return np.column_stack([np.cos(a) * np.cos(e), np.sin(a) * np.cos(e), np.sin(e)])[keep] * r[
+        keep, None
+    ]
+
+
+def test_a_surface_seen_at_a_grazing_angle_does_not_contradict_itself():
+    """A ceiling 1.4 m above two scanners 15 m apart: each sees the other's part of it at
+    grazing angles, where one bin's nearest range lies metres behind a point of the same
+    ceiling seen from elsewhere; only the bins around it hold the nearer part."""
+    a = _ceiling_scan(1.4, 25.0)
+    b = _ceiling_scan(1.4, 25.0) + [15.0, 0.0, 0.0]  # the second scan, in the first's frame
+    img = RangeImage.of(a)
+    bad, seen = img.conflicts(b)
+    assert seen > 1000 and bad == 0
+    raw = RangeImage(img.ranges, img.n_az, img.n_el, img.ranges)  # each bin alone
+    assert raw.conflicts(b)[0] > 0.001 * seen
+    hanging = np.array([[6.0, y, 0.9] for y in np.linspace(-2.0, 2.0, 9)])  # the scanner saw
+    assert img.conflicts(hanging)[0] == 9  # the ceiling 9.5 m away through these points
+
+
+def test_the_guard_is_the_smallest_range_of_each_bin_and_its_neighbours():
+    rng = np.random.default_rng(4)
+    pts = rng.normal(0.0, 10.0, (5000, 3))
+    img = RangeImage.of(pts)
+    grid = img.ranges.reshape(img.n_az, img.n_el)
+    guard = img.guard.reshape(img.n_az, img.n_el)
+    for a, e in zip(rng.integers(0, img.n_az, 300), rng.integers(0, img.n_el, 300), strict=True):
+        if not np.isfinite(grid[a, e]):
+            assert guard[a, e] == np.inf  # a direction never measured stays unmeasured
+            continue
+        around = [
+            grid[(a + da) % img.n_az, e + de]
+            for da in (-1, 0, 1)
+            for de in (-1, 0, 1)
+            if 0 <= e + de < img.n_el
+        ]
+        assert guard[a, e] == min(around)

@@ -17,6 +17,7 @@ from ndt_cli.errors import ConfigError
 
 # key: (lowest, highest) allowed value, both inclusive (None: no bound)
 RANGES: dict[str, tuple[float | None, float | None]] = {
+    "scene.radius_factor": (1.0, 20.0),
     "input.scale": (1e-6, 1e3),
     "input.min_range": (0.0, 1e5),
     "input.max_range": (1e-3, 1e5),
@@ -42,6 +43,7 @@ RANGES: dict[str, tuple[float | None, float | None]] = {
     "search.bnb_resolution": (0.1, 10.0),
     "search.bnb_window": (1.0, 500.0),
     "search.bnb_candidates": (2, 64),
+    "search.bnb_exclusion": (0.1, 100.0),
     "search.bnb_start_cell": (0.5, 100.0),
     "search.fallback_ratio": (0.5, 1.0),
     "search.free_space_ratio": (0.0, 100.0),
@@ -61,7 +63,7 @@ GATE: dict[str, tuple[float, str, float]] = {
     "quality.max_ambiguity": (0.95, "down", 0.0),
     "quality.min_constraint_ratio": (0.01, "up", 1.0),
     "quality.min_constraint_ratio_icp": (0.02, "up", 1.0),
-    "quality.max_free_space": (0.10, "down", 0.0),
+    "quality.max_free_space": (0.05, "down", 0.0),
 }
 MAX_STARTS = 100_000  # search.yaw_starts times the translation grid
 MAX_LEVELS = 12

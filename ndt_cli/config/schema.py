@@ -26,6 +26,29 @@ def key(default: Any, doc: str, *, surveyor: bool = False) -> Any:
     return field(default=default, metadata={"doc": doc, "surveyor": surveyor})
 
 
+SceneKind = Literal["auto", "street", "indoor"]
+
+
+@dataclass(frozen=True)
+class SceneConfig:
+    """What the scans are of: the settings of every other section suit it."""
+
+    kind: SceneKind = key(
+        "auto",
+        "street (outdoors: streets, squares, forests), indoor (building interiors: slices "
+        "below the ceiling, finer cells and search, rooms told apart) or auto (indoor when a "
+        "ceiling covers most of the first scan's upward view); indoor changes only keys left "
+        "at their street defaults (ndt_cli/config/scenes.py lists them)",
+        surveyor=True,
+    )
+    radius_factor: float = key(
+        2.2,
+        "the network links each scan to the scans within this many times the median distance "
+        "between nearest scans (the --radius option overrides it); indoors 3: interiors need "
+        "cycles of links, since one registration alone proves nothing where rooms repeat",
+    )
+
+
 @dataclass(frozen=True)
 class InputConfig:
     """How the files' coordinates become the frame the method works in: metres, right-handed,
@@ -164,6 +187,12 @@ class SearchConfig:
         50.0, "bnb: translations searched, +-this around the aligned scene centres (m)"
     )
     bnb_candidates: int = key(8, "bnb: best distinct poses refined by NDT")
+    bnb_exclusion: float = key(
+        8.0,
+        "bnb: poses whose source centres land closer than this (m) and whose headings differ "
+        "by at most 10 degrees are one candidate (a street's bays are 3-8 m: a pose slid by "
+        "one is not a second candidate; indoors a room is 3-4 m wide and must be one)",
+    )
     bnb_start_cell: float = key(
         5.0, "bnb: the refinement starts at the configured cells up to this size (m)"
     )
@@ -187,14 +216,17 @@ class SearchConfig:
     )
     free_space_ratio: float = key(
         2.0,
-        "the second distinct pose replaces the best when the best puts more than this many "
-        "times (1 or more) the share of points into the space the other scanner saw to be "
-        "empty (and at least free_space_share); 0: never. Right simulated poses put 1-6 % "
-        "there, the wrong ones NDT ranked first 10-39 %. Needs scans in their scanners' own "
-        "frames",
+        "a candidate is refuted when it puts more than this many times (1 or more) the share "
+        "of points into the space the other scanner saw empty than the candidate that puts "
+        "the least there (and free_space_share more); 0: never. True poses put 0-1.3 % there "
+        "on simulated streets and interiors, 0-2 % on real scans; needs scans in their "
+        "scanners' own frames",
     )
     free_space_share: float = key(
-        0.08, "the smallest share of points in free space that makes the best pose give way"
+        0.003,
+        "how much more of the points (a share) a candidate must put into free space than the "
+        "cleanest candidate to be refuted (indoors the true pose put 0-0.15 %, wrong poses "
+        "slid by a room or turned 0.2-30 %)",
     )
 
 
@@ -227,9 +259,10 @@ class QualityConfig:
 
     max_ambiguity: float = key(
         0.95,
-        "second-best distinct solution's evidence over the best's (1 = a tie); a second "
-        "solution that puts more than max_free_space of its points into space a scanner saw "
-        "empty is no alternative and does not count",
+        "a distinct candidate that the free space does not refute and that has at least this "
+        "share of the kept pose's evidence is its rival: the link is ambiguous and the network "
+        "chooses between them (indoors 0.5: NDT's evidence favours poses that put the two "
+        "scanners close together)",
     )
     min_constraint_ratio: float = key(
         0.01,
@@ -245,11 +278,12 @@ class QualityConfig:
         "real scans 0.037-0.6; corridors and links slid along a street 0.001-0.013)",
     )
     max_free_space: float = key(
-        0.10,
-        "the share of points the final pose puts into space the other scanner saw empty "
-        "(right poses: simulated streets up to 0.062, real scans up to 0.091; wrong poses "
-        "that passed every other check 0.113 and more); needs scans in their scanners' own "
-        "frames (off with search.free_space_ratio: 0)",
+        0.05,
+        "the share of points the final pose puts into space the other scanner saw empty, in "
+        "front of what it saw in the direction and those around it (right poses: simulated "
+        "streets and interiors up to 0.013, real scans up to 0.020; wrong poses that won on "
+        "evidence 0.04 and more); needs scans in their scanners' own frames (off with "
+        "search.free_space_ratio: 0)",
     )
     min_score_per_point: float = key(
         0.0,
@@ -267,12 +301,20 @@ class QualityConfig:
     overlap_distance: float = key(
         0.2, "3D overlap after ICP: a moving point needs a target point this near (m); reported"
     )
+    trust_bridges: bool = key(
+        True,
+        "a link that no cycle of links checks (a bridge of the network) may tie a scan in on "
+        "its own gate's word; false: only links on a cycle of links that agree do (interiors, "
+        "where a room repeated along a corridor makes a single registration wrong without a "
+        "sign)",
+    )
 
 
 @dataclass(frozen=True)
 class Config:
     """All settings of a registration."""
 
+    scene: SceneConfig = field(default_factory=SceneConfig)
     input: InputConfig = field(default_factory=InputConfig)
     ground: GroundConfig = field(default_factory=GroundConfig)
     slices: SlicesConfig = field(default_factory=SlicesConfig)

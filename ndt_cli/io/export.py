@@ -36,12 +36,12 @@ from typing import Protocol
 
 import numpy as np
 
-from ndt_cli.core.arrays import column_bounds
 from ndt_cli.errors import InputError, NdtError, OutputError, one_line
 from ndt_cli.io.atomic import atomic_path
+from ndt_cli.io.export_inputs import ExportScan, ScanInput, scan_inputs, union_bounds, usable
 from ndt_cli.io.names import per_scan_file_names
 from ndt_cli.io.outdir import check_shared_folder, record_shared_folder
-from ndt_cli.io.records import CHUNK_POINTS, Chunk, RawVlr, Summary, iter_records, summary
+from ndt_cli.io.records import CHUNK_POINTS, Chunk, RawVlr, iter_records
 
 log = logging.getLogger(__name__)
 
@@ -51,62 +51,6 @@ SCAN_INDEX = "scan_index"
 
 Progress = Callable[[int, int], None]
 """``progress(points_done, points_total)``: points read so far and in all inputs."""
-
-
-@dataclass(frozen=True, eq=False)
-class ExportScan:
-    """One scan to export.
-
-    ``path``: its point file (``FILE.e57#K`` for scan K of a multi-scan E57). ``name``: its
-    unique name in the outputs (per-scan files are named after it). ``index``: its number, stored
-    per point as ``scan_index`` (0..65535). ``T_world_file``: 4x4 mapping the file's raw
-    coordinates (before ``input.scale`` / ``input.axes``) to the world frame, metres, i.e.
-    ``T_world_scan @ S_scan_file``. ``S_scan_file``: 4x4 from raw file coordinates to the scanner
-    frame (``input.scale`` times ``axes_matrix(input.axes)``; identity by default), used by the
-    E57 output only. ``anchor``: the scan whose CRS the outputs carry (default: the first).
-    """
-
-    path: str | Path
-    name: str
-    index: int
-    T_world_file: np.ndarray
-    S_scan_file: np.ndarray = field(default_factory=lambda: np.eye(4))
-    anchor: bool = False
-
-    def __post_init__(self) -> None:
-        for attr in ("T_world_file", "S_scan_file"):
-            m = np.array(getattr(self, attr), dtype=np.float64)
-            if m.shape != (4, 4) or not np.isfinite(m).all():
-                raise ValueError(f"{attr} of scan {self.name!r} must be a finite 4x4 matrix")
-            m.setflags(write=False)
-            object.__setattr__(self, attr, m)
-        if not 0 <= int(self.index) <= 65535:
-            raise ValueError(f"scan index {self.index} of {self.name!r} is not in 0..65535")
-
-    @classmethod
-    def from_pose(
-        cls,
-        path: str | Path,
-        name: str,
-        index: int,
-        T_world_scan: np.ndarray,
-        *,
-        scale: float = 1.0,
-        axes: str = "x,y,z",
-        anchor: bool = False,
-    ) -> ExportScan:
-        """A scan from its registered pose ``T_world_scan`` (scanner frame to world, metres) and
-        the ``input.scale`` / ``input.axes`` its file needs (see ``InputConfig``)."""
-        from ndt_cli.config import axes_matrix
-
-        S = np.eye(4)
-        S[:3, :3] = scale * axes_matrix(axes)
-        return cls(path, name, index, np.asarray(T_world_scan, float) @ S, S, anchor)
-
-    @property
-    def T_world_scan(self) -> np.ndarray:
-        """4x4 pose: scanner frame (metres) to world frame, ``T_world_file @ inv(S_scan_file)``."""
-        return self.T_world_file @ np.linalg.inv(self.S_scan_file)
 
 
 @dataclass(frozen=True)
@@ -120,29 +64,6 @@ class ExportResult:
     points_thinned: int  # removed by the voxel filter
     written_per_scan: tuple[int, ...]
     point_format: int | None = None  # LAS point format written (LAS/LAZ only)
-
-
-@dataclass(frozen=True)
-class ScanInput:
-    """A scan with its header summary and, after a first pass when the header has none, its
-    bounding box (file frame, m) and the (min, max) of its float attributes."""
-
-    scan: ExportScan
-    summary: Summary
-    count: int
-    bounds: tuple[np.ndarray, np.ndarray] | None
-    ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
-
-    def world_bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """Box around the 8 corners of ``bounds`` in the world frame (m), or None."""
-        if self.bounds is None:
-            return None
-        lo, hi = self.bounds
-        corners = np.array(
-            [[a[0], b[1], c[2]] for a in (lo, hi) for b in (lo, hi) for c in (lo, hi)]
-        )
-        world = corners @ self.scan.T_world_file[:3, :3].T + self.scan.T_world_file[:3, 3]
-        return world.min(axis=0), world.max(axis=0)
 
 
 class Sink(Protocol):
@@ -203,68 +124,6 @@ class FirstPointThinner:
         return mask
 
 
-COLOURS = ("red", "green", "blue")
-
-
-def _first_pass(scan: ExportScan, summ: Summary, chunk_points: int) -> ScanInput:
-    """Count, bounding box (file frame, usable points) and the ranges of the float attributes
-    and of the colours, from the points."""
-    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-    ranges: dict[str, tuple[float, float]] = {}
-    n = 0
-    for chunk in iter_records(scan.path, chunk_points):
-        n += len(chunk["x"])
-        xyz = _usable(chunk)
-        if xyz.any():
-            pts = np.column_stack([chunk[a][xyz] for a in "xyz"])
-            low, high = column_bounds(pts)
-            lo, hi = np.minimum(lo, low), np.maximum(hi, high)
-        for name, values in chunk.items():
-            if name in ("x", "y", "z") or (values.dtype.kind != "f" and name not in COLOURS):
-                continue
-            finite = values[np.isfinite(values)]
-            if finite.size:
-                a, b = ranges.get(name, (np.inf, -np.inf))
-                ranges[name] = (min(a, float(finite.min())), max(b, float(finite.max())))
-    bounds = (lo, hi) if np.isfinite(lo).all() else None
-    return ScanInput(scan, summ, n, bounds, ranges)
-
-
-def _usable(chunk: Chunk) -> np.ndarray:
-    """Mask of the points that are finite and not exactly (0,0,0) in the file."""
-    x, y, z = chunk["x"], chunk["y"], chunk["z"]
-    return np.isfinite(x + y + z) & ((x != 0.0) | (y != 0.0) | (z != 0.0))
-
-
-def _wide_colours(summ: Summary) -> bool:
-    """Whether the file stores colours in more than 8 bits (LAS: 16)."""
-    d = summ.dimension("red")
-    return d is not None and d.dtype.itemsize > 1
-
-
-def _inputs(
-    scans: Sequence[ExportScan], need_bounds: bool, chunk_points: int, need_colours: bool = False
-) -> list[ScanInput]:
-    """Summaries of the scans, with a first pass over those whose header lacks what is needed
-    (``need_colours``: the range of colours stored in more than 8 bits)."""
-    out = []
-    for scan in scans:
-        summ = summary(scan.path)
-        wide = need_colours and _wide_colours(summ)
-        if wide or summ.count is None or (need_bounds and summ.bounds is None):
-            out.append(_first_pass(scan, summ, chunk_points))
-        else:
-            out.append(ScanInput(scan, summ, summ.count, summ.bounds))
-    return out
-
-
-def _union_bounds(inputs: Sequence[ScanInput]) -> tuple[np.ndarray, np.ndarray]:
-    boxes = [b for b in (i.world_bounds() for i in inputs) if b is not None]
-    if not boxes:
-        return np.zeros(3), np.zeros(3)
-    return np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
-
-
 def _check(scans: Sequence[ExportScan], out: Path) -> str:
     """The output suffix, after checking the scans (unique names and indices, one anchor)."""
     suffix = out.suffix.lower()
@@ -321,7 +180,7 @@ def _make_sink(
     if suffix in (".las", ".laz"):
         from ndt_cli.io.export_las import LasSink
 
-        return LasSink(tmp, inputs, _union_bounds(inputs), anchor, target, crs)
+        return LasSink(tmp, inputs, union_bounds(inputs), anchor, target, crs)
     from ndt_cli.io.export_other import E57Sink, PlySink
 
     if suffix == ".ply":
@@ -348,7 +207,7 @@ def _scan_chunks(
     for chunk in iter_records(item.scan.path, chunk_points):
         m = len(chunk["x"])
         tally.read += m
-        ok = _usable(chunk)
+        ok = usable(chunk)
         if not ok.all():
             tally.dropped += m - int(ok.sum())
             chunk = {k: v[ok] for k, v in chunk.items()}
@@ -494,8 +353,8 @@ def export(
     if per_scan_dir is not None:
         check_shared_folder(Path(per_scan_dir), [t.name for t in targets])
     need_bounds = suffix in (".las", ".laz") or voxel is not None
-    inputs = _inputs(scans, need_bounds, chunk_points, need_colours=suffix == ".e57")
-    thinner = None if voxel is None else FirstPointThinner(voxel, *_union_bounds(inputs))
+    inputs = scan_inputs(scans, need_bounds, chunk_points, need_colours=suffix == ".e57")
+    thinner = None if voxel is None else FirstPointThinner(voxel, *union_bounds(inputs))
     groups = [inputs] if per_scan_dir is None else [[i] for i in inputs]
     tally = _Tally(total=sum(i.count for i in inputs))
     with _removed_on_failure(None if per_scan_dir is None else Path(per_scan_dir)):

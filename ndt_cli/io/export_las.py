@@ -41,7 +41,7 @@ from ndt_cli.errors import InputError, OutputError
 from ndt_cli.io.records import Chunk, Dimension, RawVlr, Summary
 
 if TYPE_CHECKING:
-    from ndt_cli.io.export import ExportScan, ScanInput
+    from ndt_cli.io.export_inputs import ExportScan, ScanInput
 
 log = logging.getLogger(__name__)
 

@@ -133,12 +133,19 @@ class Ranked:
             self.poses[order], self.scores[order], self.evidence[order], self.converged[order]
         )
 
-    def records(self) -> tuple[Candidate, ...]:
+    def records(self, shares: np.ndarray | None = None) -> tuple[Candidate, ...]:
+        """Each candidate as a record, with its free-space share when ``shares`` are given."""
+        fs = np.full(len(self.poses), np.nan) if shares is None else shares
         return tuple(
             Candidate(
-                float(c[0]), float(c[1]), float(np.degrees(wrap_angle(c[2]))), float(s), float(e)
+                float(c[0]),
+                float(c[1]),
+                float(np.degrees(wrap_angle(c[2]))),
+                float(s),
+                float(e),
+                float(f),
             )
-            for c, s, e in zip(self.poses, self.scores, self.evidence, strict=True)
+            for c, s, e, f in zip(self.poses, self.scores, self.evidence, fs, strict=True)
         )
 
 

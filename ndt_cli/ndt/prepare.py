@@ -19,12 +19,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ndt_cli.config.scenes import for_scene
 from ndt_cli.config.schema import Config, GroundConfig, InputConfig, SlicesConfig
 from ndt_cli.core.geometry import SURFACES, Surfaces, VoxelThinner
 from ndt_cli.core.transforms import levelling_rotation, rotation4, translation
 from ndt_cli.errors import InputError
 from ndt_cli.io.blocks import Block
 from ndt_cli.ndt.backend import NUMBA, Kernels
+from ndt_cli.ndt.ceiling import CeilingView, ceiling_view
 from ndt_cli.ndt.chunks import HELD_SUFFIXES, ScanChunks, no_points_in_range
 from ndt_cli.ndt.slicing import GROUND_SAMPLE
 from ndt_cli.ndt.terrain import REACH, Terrain, terrain_of
@@ -47,6 +49,7 @@ class PreparedScan:
     points3d: np.ndarray | None = None  # thinned 3D points minus the reduction (for ICP), m
     terrain: Terrain = field(default_factory=Terrain.flat)  # ground heights, reduced level frame
     vertical: Vertical | None = None  # None: ground.z given, no levelling
+    ceiling: CeilingView | None = None  # what it sees above it (None: too little to tell)
 
     def to_local(self) -> np.ndarray:
         """4x4 from the scan frame to the reduced, levelled frame: q = L (p - reduction)."""
@@ -230,7 +233,25 @@ def prepare_chunks(
         thin,
         frame.terrain,
         frame.vertical,
+        ceiling_view(first.sample, frame.level),
     )
+
+
+def look(scan: str | Path | np.ndarray, cfg: Config) -> CeilingView | None:
+    """What a scan sees above it (:mod:`ndt_cli.ndt.ceiling`), from the first pass alone."""
+    first = _first_pass(ScanChunks.of(scan, cfg.input), cfg.input)
+    frame = scan_frame(first.sample, cfg.ground)
+    return ceiling_view(first.sample, frame.level)
+
+
+def settle_scene(cfg: Config, view: CeilingView | None) -> tuple[Config, str]:
+    """``cfg`` for the scene a scan's ``view`` shows when ``scene.kind`` is auto (indoor when
+    it sees a ceiling, else street), as given otherwise; and why, in words."""
+    if cfg.scene.kind != "auto":
+        return cfg, f"{cfg.scene.kind}, as configured"
+    kind = "indoor" if view is not None and view.indoors else "street"
+    seen = "too few points look upward to tell" if view is None else view.describe()
+    return for_scene(cfg, kind), f"{kind}: {seen}"
 
 
 def prepare(points: np.ndarray, cfg: Config, path: Path | None = None) -> PreparedScan:

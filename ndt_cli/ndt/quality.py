@@ -10,10 +10,11 @@ because its false alarms and misses, measured over varied simulated streets and 
   Hessian's translation block below ``quality.min_constraint_ratio``);
 - ``suspect``: ICP's correction was too large to trust; the final pose puts more than
   ``quality.max_free_space`` of the points into space the other scanner saw empty
-  (:mod:`ndt_cli.ndt.visibility`); or a physically possible second solution has nearly the
-  same evidence (``quality.max_ambiguity``). The score per point and the slice overlap are
-  optional checks, off by default: they measure how much of the scans overlap, not whether the
-  pose is right; when what the scanners saw cannot be checked they are on
+  (:mod:`ndt_cli.ndt.visibility`); or the pose has rivals: other poses the data cannot tell
+  from it (:mod:`ndt_cli.ndt.rivals`), each named in the warnings. The score per point and
+  the slice overlap are optional checks, off by default: they measure how much of the scans
+  overlap, not whether the pose is right; when what the scanners saw cannot be checked they
+  are on
   (:data:`BLIND_SCORE_PER_POINT`, :data:`BLIND_OVERLAP`).
 
 NDT's measures are taken on 1 m cells built with the default grid settings
@@ -23,6 +24,7 @@ precedence: ``no_overlap``, ``not_converged``, ``degenerate``, ``suspect``, ``ok
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,7 +34,7 @@ from ndt_cli.ndt.backend import Kernels
 from ndt_cli.ndt.grid import NDTMap
 from ndt_cli.ndt.kernels import HESS, MATCHED, SCORE, SourcePoints, sym3
 from ndt_cli.ndt.refine import Refinement
-from ndt_cli.ndt.result import Status
+from ndt_cli.ndt.result import Rival, Status
 
 
 @dataclass(frozen=True)
@@ -77,15 +79,13 @@ BLIND_OVERLAP = 0.2
 
 
 def ndt_warnings(
-    fit: Fit, q: QualityConfig, refined: bool, alternative: bool, blind: bool = False
-) -> tuple[list[str], list[str], np.ndarray | None]:
-    """Warnings and notes of the NDT fit, and the weak translation direction (levelled target
-    frame, a 3-vector) when the slices alone gave the pose (not ``refined`` by ICP) and it is
-    degenerate. ``alternative``: the second-best pose is physically possible (it does not
-    contradict what the scanners saw), so a near tie with it makes the link ambiguous."""
+    fit: Fit, q: QualityConfig, refined: bool, blind: bool = False
+) -> tuple[list[str], np.ndarray | None]:
+    """Warnings of the NDT fit, and the weak translation direction (levelled target frame, a
+    3-vector) when the slices alone gave the pose (not ``refined`` by ICP) and it is
+    degenerate."""
     weak, constraint = weakest_direction(fit.hessian)
     degenerate = not refined and constraint < q.min_constraint_ratio
-    ambiguous = fit.ambiguity > q.max_ambiguity
     spp = max(q.min_score_per_point, BLIND_SCORE_PER_POINT if blind else 0.0)
     overlap = max(q.min_overlap, BLIND_OVERLAP if blind else 0.0)
     unseen = " (free space not checkable)" if blind else ""
@@ -97,20 +97,9 @@ def ndt_warnings(
             f"degenerate: translation along ({weak[0]:.2f}, {weak[1]:.2f}) is weakly "
             f"constrained (ratio {constraint:.4f} < {q.min_constraint_ratio})",
         ),
-        (
-            ambiguous and alternative,
-            f"ambiguous: the weaker of the two best solutions has {fit.ambiguity:.2f} of the "
-            "stronger's evidence",
-        ),
     ]
-    notes = []
-    if ambiguous and not alternative:
-        notes.append(
-            f"the second-best solution has {fit.ambiguity:.2f} of the best's evidence but "
-            "contradicts what the scanners saw (free space): not an alternative"
-        )
     direction = np.array([weak[0], weak[1], 0.0]) if degenerate else None
-    return [text for bad, text in checks if bad], notes, direction
+    return [text for bad, text in checks if bad], direction
 
 
 def icp_warnings(
@@ -154,27 +143,29 @@ class Verdict:
     warnings: tuple[str, ...]
     weak_direction: np.ndarray | None
     notes: tuple[str, ...] = ()
-    refuted: bool = False  # the pose contradicts the data: see :func:`judge`
+    refuted: bool = False  # the pose contradicts the data: see :func:`verdict_of`
 
 
-def judge(
+def verdict_of(
     fit: Fit,
     converged: bool,
     refined: Refinement,
     level: np.ndarray,
     q: QualityConfig,
     sights: Sights = Sights(),
+    rivals: Sequence[Rival] = (),
 ) -> Verdict:
     """The verdict on a registration, in the order of precedence of the module docstring. A
     pose is *refuted*, not merely doubted, when it puts more than ``quality.max_free_space`` of
     the points into space a scanner saw empty, or when ICP moved it further than it may: the
     data contradict it, so no agreement with other links can confirm it (two links slid by
     the same period of a street's facades agree with each other)."""
-    plausible = not np.isfinite(sights.second) or sights.second <= q.max_free_space
     blind = not np.isfinite(sights.final)
-    warnings, notes, weak = ndt_warnings(fit, q, refined.icp is not None, plausible, blind)
+    warnings, weak = ndt_warnings(fit, q, refined.icp is not None, blind)
     more, weak_icp = icp_warnings(refined, level, q)
     warnings += more
+    warnings += [f"ambiguous: {r.text}" for r in rivals]
+    notes: list[str] = []
     contradicts = np.isfinite(sights.final) and sights.final > q.max_free_space
     if contradicts:
         warnings.append(

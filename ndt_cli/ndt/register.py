@@ -29,20 +29,24 @@ from pathlib import Path
 
 import numpy as np
 
-from ndt_cli.config.schema import Config, SearchConfig
+from ndt_cli.config.scenes import for_scene
+from ndt_cli.config.schema import Config
 from ndt_cli.core.geometry import Surfaces
 from ndt_cli.core.transforms import pose2d_matrix, yaw_of
 from ndt_cli.ndt.backend import NUMBA, Kernels
 from ndt_cli.ndt.coarse_to_fine import Ranked, coarse_to_fine, rank, with_verification
+from ndt_cli.ndt.grid import NDTMap
+from ndt_cli.ndt.kernels import SourcePoints
 from ndt_cli.ndt.levels import SourceSampler, TargetMaps, gate_inputs
 from ndt_cli.ndt.precompile import search_kernels_ahead
 from ndt_cli.ndt.prepare import PreparedScan, load_and_prepare_pair
-from ndt_cli.ndt.quality import Fit, Sights, Verdict, judge, measure_fit
+from ndt_cli.ndt.quality import Fit, Sights, Verdict, measure_fit, verdict_of
 from ndt_cli.ndt.refine import Refinement, refine_pose
-from ndt_cli.ndt.result import LevelStats, RegistrationResult
+from ndt_cli.ndt.result import LevelStats, RegistrationResult, Rival
+from ndt_cli.ndt.rivals import Judged, describe_rival, judge
 from ndt_cli.ndt.search import global_start, start_search
 from ndt_cli.ndt.terrain import height_offset
-from ndt_cli.ndt.visibility import free_space_share, margin, prefer
+from ndt_cli.ndt.visibility import free_space_share, margin
 
 
 @dataclass(frozen=True)
@@ -147,30 +151,41 @@ def _refine(
     )
 
 
-def _free_space(
-    ranked: Ranked, target: PreparedScan, source: PreparedScan, s: SearchConfig, voxel: float
-) -> tuple[Ranked, float, str]:
-    """The candidates, the second first when the best contradicts what the scanners saw
-    (:mod:`ndt_cli.ndt.visibility`), the free-space share of the pose now second (NaN when not
-    measured) and the note that says the second was kept ('' when not)."""
-    if len(ranked.poses) < 2 or s.free_space_ratio <= 0.0:
-        return ranked, float("nan"), ""
-    sights, gap = (target.sight, source.sight), margin(voxel)
-    if sights[0] is None or sights[1] is None:
-        return ranked, float("nan"), ""
-    shares = np.array(
-        [free_space_share(*sights, lifted(target, source, p), gap) for p in ranked.poses[:2]]
-    )
-    if prefer(shares, s.free_space_ratio, s.free_space_share) == 0:
-        return ranked, float(shares[1]), ""
-    return (
-        ranked.promote(1),
-        float(shares[0]),
-        (
-            f"free space: the pose of most evidence puts {shares[0]:.0%} of the points into space "
-            f"the other scanner saw empty, the second pose {shares[1]:.0%}; the second is kept"
-        ),
-    )
+MAX_JUDGED = 16  # candidates, most evidence first, whose free space is measured
+
+
+def _judged(ranked: Ranked, target: PreparedScan, source: PreparedScan, cfg: Config) -> Judged:
+    """The candidates judged by what the scanners saw (:mod:`ndt_cli.ndt.rivals`): the
+    :data:`MAX_JUDGED` of most evidence measured, NaN for the rest and for scans that cannot
+    say what they saw (nothing is refuted then)."""
+    s = cfg.search
+    shares = np.full(len(ranked.poses), np.nan)
+    sights = (target.sight, source.sight)
+    if s.free_space_ratio > 0.0 and sights[0] is not None and sights[1] is not None:
+        gap = margin(cfg.refine.voxel)
+        for k, pose in enumerate(ranked.poses[:MAX_JUDGED]):
+            shares[k] = free_space_share(*sights, lifted(target, source, pose), gap)
+    return judge(ranked, shares, s.free_space_ratio, s.free_space_share, cfg.quality.max_ambiguity)
+
+
+def _rivals(
+    judged: Judged,
+    target: PreparedScan,
+    source: PreparedScan,
+    gate: tuple[NDTMap, SourcePoints],
+    kernels: Kernels,
+) -> tuple[Rival, ...]:
+    """The winner's rivals as records: each pose lifted to the scans' frames, with its Hessian
+    on the gate's cells."""
+    r, out = judged.ranked, []
+    for k in judged.rivals:
+        pose = r.poses[k]
+        share = float(judged.shares[k])
+        evidence = float(r.evidence[k] / max(r.evidence[0], 1e-300))
+        hessian = measure_fit(*gate, pose, 0.0, kernels).hessian
+        text = describe_rival(r.poses[0], pose, evidence, share)
+        out.append(Rival(lifted(target, source, pose), hessian, evidence, share, text))
+    return tuple(out)
 
 
 def _final_free_space(
@@ -196,6 +211,9 @@ class _Stages:
     points_per_slice: tuple[int, ...]
     sights: Sights
     score_final: float
+    shares: np.ndarray
+    rivals: tuple[Rival, ...]
+    scene: str
 
 
 def register_prepared(
@@ -218,21 +236,22 @@ def register_prepared(
     refined = coarse_to_fine(
         start.candidates, schedule, maps, sampler, cfg.optimizer, restarts, kernels
     )
-    ranked, second_share, picked = _free_space(
-        rank(refined, schedule[-1]), target, source, cfg.search, cfg.refine.voxel
-    )
+    judged = _judged(rank(refined, schedule[-1]), target, source, cfg)
+    ranked = judged.ranked
     gate_map, gate_points = gate_inputs(
         maps, sampler, target.slices, source.slices, cfg.grid, cfg.source
     )
     fit = measure_fit(gate_map, gate_points, ranked.poses[0], ranked.ambiguity, kernels)
-    converged = bool(ranked.converged[0]) if picked else refined.converged
+    rivals = _rivals(judged, target, source, (gate_map, gate_points), kernels)
+    converged = bool(ranked.converged[0]) if judged.note else refined.converged
     T = lifted(target, source, ranked.poses[0])
     t_ndt = time.perf_counter() - t_start
     refinement = _refine(target, source, T, fit.score > 0.0 and converged, cfg, kernels.surfaces)
     moved = _planar(target, source, refinement.T) if refinement.icp is not None else None
     after = None if moved is None else measure_fit(gate_map, gate_points, moved, 0.0, kernels)
-    sights = Sights(_final_free_space(target, source, refinement.T, cfg), second_share, picked)
-    verdict = judge(fit, converged, refinement, target.level, cfg.quality, sights)
+    second = float(judged.shares[1]) if len(judged.shares) > 1 else float("nan")
+    sights = Sights(_final_free_space(target, source, refinement.T, cfg), second, judged.note)
+    verdict = verdict_of(fit, converged, refinement, target.level, cfg.quality, sights, rivals)
     per_slice = tuple(int(n) for n in sampler.fine.per_slice(len(source.slices)))
     stages = _Stages(
         (*start.levels, *refined.levels),
@@ -244,6 +263,9 @@ def register_prepared(
         per_slice,
         sights,
         float("nan") if after is None else after.per_point,
+        judged.shares,
+        rivals,
+        cfg.scene.kind,
     )
     timings = {
         "grid_s": maps.build_s,
@@ -275,7 +297,7 @@ def _result(
         overlap=s.fit.overlap,
         points_per_slice=s.points_per_slice,
         levels=s.levels,
-        candidates=s.ranked.records(),
+        candidates=s.ranked.records(s.shares),
         hessian=s.fit.hessian,
         ground_z_target=target.ground_z,
         ground_z_source=source.ground_z,
@@ -303,7 +325,14 @@ def _result(
         refuted=s.verdict.refuted,
         vertical_target=_vertical(target),
         vertical_source=_vertical(source),
+        rivals=s.rivals,
+        scene=s.scene,
     )
+
+
+def _indoors(*scans: PreparedScan) -> bool:
+    """Every scan sees a ceiling over it (:mod:`ndt_cli.ndt.ceiling`)."""
+    return all(s.ceiling is not None and s.ceiling.indoors for s in scans)
 
 
 def register(
@@ -317,8 +346,9 @@ def register(
 
     ``target``/``source`` are point files (PLY, LAS/LAZ, E57, PCD, xyz/txt/csv) or (N,3) arrays
     in metres; ``config`` a :class:`~ndt_cli.config.Config`, a YAML path or ``None`` for the
-    defaults; ``init`` an optional 4x4 guess of ``T_target_source`` (no guess: a start search is
-    run); ``kernels`` the compiled kernels or their numpy twins (:mod:`ndt_cli.ndt.backend`).
+    defaults (``scene.kind`` auto: the interior settings when both scans see a ceiling);
+    ``init`` an optional 4x4 guess of ``T_target_source`` (no guess: a start search is run);
+    ``kernels`` the compiled kernels or their numpy twins (:mod:`ndt_cli.ndt.backend`).
     """
     from ndt_cli.config import load
 
@@ -326,6 +356,10 @@ def register(
     cfg = config if isinstance(config, Config) else load(config)
     with search_kernels_ahead(enabled=kernels is NUMBA):  # on an empty cache: the other core
         tgt, src = load_and_prepare_pair(target, source, cfg, kernels)
+        if cfg.scene.kind == "auto":
+            cfg = for_scene(cfg, "indoor" if _indoors(tgt, src) else "street")
+            if cfg.scene.kind == "indoor":  # cut again below the ceiling
+                tgt, src = load_and_prepare_pair(target, source, cfg, kernels)
     t_read = time.perf_counter() - t0
     result = register_prepared(tgt, src, cfg, init, kernels)
     timings = {"read_prepare_s": t_read, **result.timings}

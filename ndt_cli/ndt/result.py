@@ -57,7 +57,46 @@ class Candidate:
     yaw_deg: float
     score: float  # at the finest cell size
     evidence: float  # fit-weighted score over the finest levels; the kept pose's is highest
-    # unless the free-space check kept the second (ndt_cli.ndt.visibility)
+    # unless the free-space check refuted those of more (ndt_cli.ndt.rivals)
+    free_space: float = float("nan")  # share of the points it puts into free space (NaN:
+    # not measured)
+
+
+@dataclass(frozen=True, repr=False)
+class Rival:
+    """A second pose the data cannot tell from the kept one (:mod:`ndt_cli.ndt.rivals`):
+    ``T_target_source`` (4x4, the scans' own frames; the slices' pose, before any ICP), the NDT
+    Hessian there (3x3, -score in tx m, ty m, yaw rad, on the gate's cells), its share of the
+    kept pose's evidence, its free-space share (NaN: not measured) and how it differs from the
+    kept pose, in words."""
+
+    T_target_source: np.ndarray
+    hessian: np.ndarray
+    evidence: float
+    free_space: float
+    text: str
+
+    def __repr__(self) -> str:
+        return f"Rival({self.text})"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "T_target_source": self.T_target_source.tolist(),
+            "hessian": self.hessian.tolist(),
+            "evidence": self.evidence,
+            "free_space": self.free_space,
+            "text": self.text,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Rival:
+        return cls(
+            np.array(d["T_target_source"], dtype=float),
+            np.array(d["hessian"], dtype=float),
+            float(d["evidence"]),
+            float(d["free_space"]),
+            str(d["text"]),
+        )
 
 
 def describe_direction(v: np.ndarray | None) -> str:
@@ -121,10 +160,12 @@ class RegistrationResult:
     score_per_point_final: float = float("nan")
     free_space_second: float = float("nan")  # that of the second-best pose
     notes: tuple[str, ...] = field(default=())  # what the gate checked and let pass
-    refuted: bool = False  # the data contradict the pose (ndt_cli.ndt.quality.judge)
+    refuted: bool = False  # the data contradict the pose (ndt_cli.ndt.quality.verdict_of)
     # how each scan's vertical was found (ndt_cli.ndt.vertical.VerticalSource; "given": ground.z)
     vertical_target: str = ""
     vertical_source: str = ""
+    rivals: tuple[Rival, ...] = ()  # poses the data cannot tell from this one: ambiguous
+    scene: str = "street"  # the settings it was registered with (ndt_cli.config.scenes)
 
     def __repr__(self) -> str:
         rot = f"yaw {self.yaw_deg:.4f} deg"
@@ -237,6 +278,8 @@ class RegistrationResult:
             "refuted": self.refuted,
             "vertical_target": self.vertical_target,
             "vertical_source": self.vertical_source,
+            "rivals": [r.to_dict() for r in self.rivals],
+            "scene": self.scene,
         }
 
     @classmethod
@@ -262,6 +305,7 @@ class RegistrationResult:
             level_source=np.array(d["level_source"], dtype=float),
             icp_centroid=_array(d.get("icp_centroid")),
             T_ndt=_array(d.get("T_ndt")),
+            rivals=tuple(Rival.from_dict(r) for r in d.get("rivals", ())),
         )
         return cls(**kw)
 

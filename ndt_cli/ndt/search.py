@@ -94,6 +94,7 @@ def global_start(
         resolution=search.bnb_resolution,
         window=search.bnb_window,
         candidates=search.bnb_candidates,
+        exclusion=search.bnb_exclusion,
         kernels=kernels.search,
     )
     best = float(found.scores[0]) if len(found.scores) else 0.0

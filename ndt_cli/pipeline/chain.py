@@ -3,10 +3,13 @@
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from ndt_cli.config.schema import Config
+from ndt_cli.errors import NdtError
+from ndt_cli.ndt.prepare import look, settle_scene
 from ndt_cli.pipeline.campaign import Campaign, NetworkOptions
 from ndt_cli.pipeline.executors import Executor
 from ndt_cli.pipeline.links import Link
@@ -15,13 +18,33 @@ from ndt_cli.pipeline.network import classic_chain
 from ndt_cli.pipeline.result import ChainResult
 from ndt_cli.pipeline.workers import default_jobs
 
-__all__ = ["ChainResult", "NetworkOptions", "plan_links", "run_chain"]
+__all__ = ["ChainResult", "NetworkOptions", "plan_links", "run_chain", "scene_of"]
+
+log = logging.getLogger(__name__)
+LOOKS = 3  # scans looked at in turn for the scene when the first cannot be read
 
 
 def plan_links(n_scans: int, unreadable: set[int]) -> list[tuple[int, int]]:
     """(target, source) pairs of the classic chain: each scan against the last readable scan
     before it."""
     return [(k.target, k.source) for k in classic_chain(n_scans, unreadable)]
+
+
+def scene_of(cfg: Config, scans: Sequence[str | Path]) -> Config:
+    """``cfg`` for the scene of the campaign (``scene.kind`` auto: what the first readable of
+    ``scans`` sees above it, :func:`~ndt_cli.ndt.prepare.settle_scene`)."""
+    if cfg.scene.kind != "auto":
+        return cfg
+    view = None
+    for path in list(scans)[:LOOKS]:
+        try:
+            view = look(path, cfg)
+            break
+        except NdtError:
+            continue
+    settled, why = settle_scene(cfg, view)
+    log.info("scene %s", why)
+    return settled
 
 
 def run_chain(
@@ -41,6 +64,7 @@ def run_chain(
     ``executor``: where tasks run (default: ``jobs`` local worker processes); results do not
     depend on it. The executor is closed when the run ends.
     """
+    cfg = scene_of(cfg, [scans[anchor], *scans])
     pool = executor or WorkerPool(default_jobs(jobs))
     campaign = Campaign(
         cfg, out, pool, network=network, resume=resume, anchor=anchor, on_link=on_progress

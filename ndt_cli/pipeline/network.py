@@ -65,9 +65,11 @@ def classic_chain(n_scans: int, unreadable: Iterable[int] = ()) -> list[PlannedL
     return links
 
 
-def default_radius(groups: Sequence[Mapping[int, np.ndarray]]) -> float:
-    """:data:`RADIUS_FACTOR` times the median distance (m) from a placed scan to the nearest
-    other scan of its group; NaN when no group has two scans."""
+def default_radius(
+    groups: Sequence[Mapping[int, np.ndarray]], factor: float = RADIUS_FACTOR
+) -> float:
+    """``factor`` times the median distance (m) from a placed scan to the nearest other scan
+    of its group; NaN when no group has two scans."""
     nearest = []
     for group in groups:
         xy = np.array(list(group.values())).reshape(-1, 2)
@@ -77,7 +79,7 @@ def default_radius(groups: Sequence[Mapping[int, np.ndarray]]) -> float:
             nearest.append(d.min(axis=1))
     if not nearest:
         return float("nan")
-    return RADIUS_FACTOR * float(np.median(np.concatenate(nearest)))
+    return factor * float(np.median(np.concatenate(nearest)))
 
 
 def plan_near(

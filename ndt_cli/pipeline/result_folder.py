@@ -29,7 +29,7 @@ from ndt_cli.config import load
 from ndt_cli.config.schema import Config
 from ndt_cli.errors import InputError
 from ndt_cli.io.crs import wkt_records
-from ndt_cli.io.export import ExportScan
+from ndt_cli.io.export_inputs import ExportScan
 from ndt_cli.io.matrices import rigid_problem
 from ndt_cli.io.outdir import check_unchanged
 from ndt_cli.io.records import RawVlr

@@ -27,12 +27,20 @@ from ndt_cli.pipeline.control import Control
 from ndt_cli.pipeline.covariance import DEFAULT_MAX_SIGMA, icp_covariance, ndt_covariance
 from ndt_cli.pipeline.datum import Cluster, Datum, datum
 from ndt_cli.pipeline.graph import Edge, EdgeResidual
+from ndt_cli.pipeline.hypotheses import Choice, Hypothesis, choose
 from ndt_cli.pipeline.links import Link
 from ndt_cli.pipeline.network import LinkKind
-from ndt_cli.pipeline.verify import EdgeState, NodeStatus, NodeVerdict, Verification, verify
+from ndt_cli.pipeline.verify import (
+    EdgeState,
+    EdgeVerdict,
+    NodeStatus,
+    NodeVerdict,
+    Verification,
+    verify,
+)
 
 USABLE = (Status.OK, Status.SUSPECT, Status.DEGENERATE)  # links whose transform can be tested
-# (unless the data refute it: ndt_cli.ndt.quality.judge)
+# (unless the data refute it: ndt_cli.ndt.quality.verdict_of)
 
 
 @dataclass(frozen=True)
@@ -80,7 +88,7 @@ class NetworkSolution:
 
 def usable(link: Link) -> bool:
     """A link whose transform the network can test: registered, and not refuted by its data
-    (:func:`ndt_cli.ndt.quality.judge`)."""
+    (:func:`ndt_cli.ndt.quality.verdict_of`)."""
     return link.status in USABLE and not link.result.refuted
 
 
@@ -151,13 +159,19 @@ def solve(
     unreadable: dict[int, str],
     controls: Sequence[Control] = (),
     grid_scale: float = 1.0,
+    ambiguity: float = 0.95,
+    trust_bridges: bool = True,
 ) -> NetworkSolution:
     """The pose and status of every scan, and the state of every link; with the adjustment,
     the anchor's cluster in the world of :mod:`ndt_cli.pipeline.datum` (levelled, or the
-    coordinate system of the ``controls``, whose grid distance over ground is ``grid_scale``)."""
+    coordinate system of the ``controls``, whose grid distance over ground is ``grid_scale``).
+    ``ambiguity``: the share of evidence that makes a second placement of two groups a rival
+    of the first (``quality.max_ambiguity``; :mod:`ndt_cli.pipeline.hypotheses`);
+    ``trust_bridges``: a link on no cycle may tie a scan in (``quality.trust_bridges``)."""
     plain = tuple(chained(n_scans, links, anchor, {LinkKind.ADJACENT}))
     if adjust:
-        return _adjusted(n_scans, anchor, links, unreadable, plain, controls, grid_scale)
+        judging = (ambiguity, trust_bridges)
+        return _adjusted(n_scans, anchor, links, unreadable, plain, controls, grid_scale, judging)
     poses = chained(n_scans, links, anchor, set(LinkKind))
     scans = tuple(
         ScanPose(NodeStatus.OK, T, cluster=0)
@@ -190,35 +204,150 @@ def _adjusted(
     plain: tuple[np.ndarray | None, ...],
     controls: Sequence[Control] = (),
     grid_scale: float = 1.0,
+    judging: tuple[float, bool] = (0.95, True),
 ) -> NetworkSolution:
     """Verify and adjust the network of usable links, set it in the world; map nodes and edges
-    back."""
-    used = [k for k, link in enumerate(links) if usable(link)]
+    back. Links with rivals stay out of the consensus: the poses chosen among theirs join the
+    firm links (:mod:`ndt_cli.pipeline.hypotheses`). ``judging``: the evidence share that
+    makes a rival placement and whether bridges are trusted (see :func:`solve`)."""
+    net = _network(n_scans, anchor, links, *judging)
     red = reductions(n_scans, links)
-    edges = [
-        Edge(
-            links[k].target,
-            links[k].source,
-            links[k].result.T_reduced,
-            link_covariance(links[k].result),
-            trusted=links[k].ok,
-        )
-        for k in used
-    ]
-    v = verify(n_scans, anchor, edges)
-    scans = [_scan_pose(node, red, v.roots, unreadable, links) for node in v.nodes]
-    world = _datum(v, edges, links, red, controls, grid_scale)
+    nodes = _ambiguous_nodes(net.v, net.left, net.texts)
+    scans = [_scan_pose(node, red, net.v.roots, unreadable, links) for node in nodes]
+    world = _datum(net.v, net.edges, links, red, controls, grid_scale)
     if world is not None:
-        scans = _in_world(scans, world, v, red, anchor)
+        scans = _in_world(scans, world, net.v, red, anchor)
+    return NetworkSolution(
+        tuple(scans),
+        _fits(links, net),
+        plain,
+        adjusted=True,
+        timings=dict(net.v.timings),
+        datum=world,
+    )
+
+
+@dataclass(frozen=True)
+class _Network:
+    """The verified network: its verification, edges and the links they come from (``used``,
+    by position), the choice made for each link judged as hypotheses, and the links left
+    unchosen with the text that says why (by link)."""
+
+    v: Verification
+    edges: list[Edge]
+    used: list[int]
+    choices: dict[int, Choice]
+    left: dict[int, Hypothesis]
+    texts: dict[int, str]
+
+
+def _network(
+    n_scans: int, anchor: int, links: Sequence[Link], ambiguity: float, trust_bridges: bool
+) -> _Network:
+    """Verify the firm links (usable, without rivals), choose among the poses of the links
+    with rivals, and of the firm links that only bridges would keep, against them
+    (:mod:`ndt_cli.pipeline.hypotheses`), and verify the firm and chosen links together."""
+    usable_ids = [k for k, link in enumerate(links) if usable(link)]
+    firm = [k for k in usable_ids if not links[k].result.rivals]
+    edges = [_edge(links[k]) for k in firm]
+    v = verify(n_scans, anchor, edges, trust_bridges=trust_bridges)
+    loose = {firm[i] for i, e in enumerate(v.edges) if _unchecked(e)}
+    hyps = {k: _hypotheses(links[k], k) for k in usable_ids if links[k].result.rivals}
+    hyps.update({k: [Hypothesis(k, 0, _edge(links[k]), 1.0)] for k in loose})
+    groups, poses = [n.cluster for n in v.nodes], [n.pose for n in v.nodes]
+    choices = choose(groups, poses, hyps, v.threshold, ambiguity)
+    chosen = sorted(k for k, c in choices.items() if c.chosen is not None)
+    if chosen:
+        used = [k for k in firm if k not in loose] + chosen
+        edges = [_edge(links[k]) if k in firm else choices[k].chosen.edge for k in used]
+        v = verify(n_scans, anchor, edges, trust_bridges=trust_bridges)
+    else:
+        used = firm
+    left = {k: hyps[k][0] for k in choices if k not in chosen and not choices[k].rejected}
+    texts = {k: _why_left(links[k]) for k in left}
+    return _Network(v, edges, used, choices, left, texts)
+
+
+def _unchecked(verdict: EdgeVerdict) -> bool:
+    """A link its gate passed, left out all the same: a bridge, and no bridge is trusted (a
+    gate-ok link is unused for no other reason)."""
+    return verdict.trusted and verdict.state is EdgeState.UNUSED
+
+
+def _why_left(link: Link) -> str:
+    """Why a link left unchosen cannot tie a scan in: its rivals, or no cycle checks it."""
+    rivals = link.result.rivals
+    if rivals:
+        return "rival " + "; ".join(r.text for r in rivals) + "; the network could not choose"
+    return "no cycle of links checks it, and no bridge is trusted here"
+
+
+def _fits(links: Sequence[Link], net: _Network) -> tuple[LinkFit, ...]:
+    """What the network made of each link."""
     fits = [LinkFit(EdgeState.UNUSED, reason=_left_out(k)) for k in links]
-    for verdict, k in zip(v.edges, used, strict=True):
+    for k, c in net.choices.items():
+        state = EdgeState.REJECTED if c.rejected else EdgeState.UNUSED
+        fits[k] = LinkFit(state, reason=c.reason)
+    for verdict, k in zip(net.v.edges, net.used, strict=True):
         reason = verdict.reason
+        if k in net.choices:
+            reason = f"{net.choices[k].reason}; {reason}"
         if links[k].status is Status.DEGENERATE and verdict.state is not EdgeState.REJECTED:
             reason += "; degenerate: only its rotation and height count"
         fits[k] = LinkFit(verdict.state, verdict.residual, reason)
-    return NetworkSolution(
-        tuple(scans), tuple(fits), plain, adjusted=True, timings=dict(v.timings), datum=world
-    )
+    return tuple(fits)
+
+
+def _edge(link: Link) -> Edge:
+    """A link's kept pose as an edge of the pose graph (between the reduced frames)."""
+    r = link.result
+    return Edge(link.target, link.source, r.T_reduced, link_covariance(r), trusted=link.ok)
+
+
+def _hypotheses(link: Link, k: int) -> list[Hypothesis]:
+    """The kept pose and every rival of an ambiguous link as hypotheses (rivals' covariances
+    from their NDT Hessians, as an NDT-only link's)."""
+    r = link.result
+    out = [Hypothesis(k, 0, replace(_edge(link), trusted=True), 1.0)]
+    A, B = np.eye(4), np.eye(4)
+    A[:3, 3], B[:3, 3] = -r.reduction_target, r.reduction_source
+    for n, rival in enumerate(r.rivals, start=1):
+        T = A @ rival.T_target_source @ B
+        cov = ndt_covariance(
+            rival.hessian, T, level_target=r.level_target, level_source=r.level_source
+        )
+        out.append(Hypothesis(k, n, Edge(link.target, link.source, T, cov), rival.evidence))
+    return out
+
+
+def _ambiguous_nodes(
+    v: Verification, left: dict[int, Hypothesis], texts: dict[int, str]
+) -> tuple[NodeVerdict, ...]:
+    """The verdicts, with scans that no kept link reaches but an ambiguous link left unchosen
+    does made suspect: posed by its kept pose, the reason naming the link and its rivals
+    (``texts``, by link)."""
+    nodes = list(v.nodes)
+    changed = True
+    while changed:
+        changed = False
+        for k, h in sorted(left.items()):
+            e = h.edge
+            for near, far in ((e.target, e.source), (e.source, e.target)):
+                if nodes[near].pose is None or nodes[far].status is not NodeStatus.UNPOSED:
+                    continue
+                step = e.T_target_source if near == e.target else np.linalg.inv(e.T_target_source)
+                why = f"reached only through link {k} (T_{e.target}_{e.source}): {texts[k]}"
+                nodes[far] = NodeVerdict(
+                    far,
+                    NodeStatus.SUSPECT,
+                    nodes[near].pose @ step,
+                    None,
+                    why,
+                    None,
+                    nodes[near].cluster,
+                )
+                changed = True
+    return tuple(nodes)
 
 
 def _verticals(links: Sequence[Link]) -> tuple[dict[int, np.ndarray], dict[int, str]]:

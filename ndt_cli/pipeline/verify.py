@@ -259,11 +259,11 @@ class _Verifier:
         by :data:`TRUST`."""
         return self._chi2(k) / (TRUST if self.edges[k].trusted else 1.0)
 
-    def drop_untrusted_bridges(self) -> set[int]:
-        """Kept bridges whose own gate failed leave the kept set (they cannot be checked);
-        returns them."""
+    def drop_untrusted_bridges(self, trust_bridges: bool = True) -> set[int]:
+        """Kept bridges whose own gate failed (every bridge, unless ``trust_bridges``) leave
+        the kept set (they cannot be checked); returns them."""
         free = bridges(self.solver.n, self.edges, sorted(self.kept))
-        weak = {k for k in free if not self.edges[k].trusted}
+        weak = {k for k in free if not (trust_bridges and self.edges[k].trusted)}
         self.kept -= weak
         return weak
 
@@ -275,7 +275,8 @@ class _Verifier:
             if k in self.rejected:
                 out.append((EdgeState.REJECTED, self.rejected[k]))
             elif k in unchecked:
-                text = "a bridge (on no cycle of kept links) whose own gate failed: not checkable"
+                why = "its own gate failed" if not self.edges[k].trusted else "no bridge is trusted"
+                text = f"a bridge (on no cycle of kept links) and {why}: not checkable"
                 out.append((EdgeState.UNUSED, text))
             elif k in free and k in self.born_bridges:
                 out.append((EdgeState.USED, "a bridge (on no cycle of links): its gate's word"))
@@ -398,6 +399,7 @@ def verify(
     *,
     threshold: float = CHI2_6_999,
     max_iterations: int = 100,
+    trust_bridges: bool = True,
 ) -> Verification:
     """Decide which links to keep by their agreement and their gates, adjust every cluster,
     and judge every node (see the module docstring).
@@ -407,6 +409,8 @@ def verify(
     kernel of width its square root. ``initial_poses``: optional ``T_world_node`` guesses
     (None entries: composed through the links, gate-ok ones first). Poses are in each
     cluster's frame: the anchor's for cluster 0, the lowest node's for the others.
+    ``trust_bridges`` false: a bridge is never kept on its gate's word, so that every kept
+    link lies on a cycle of kept links.
     """
     t0 = time.perf_counter()
     width = float(np.sqrt(threshold))
@@ -414,7 +418,7 @@ def verify(
     solver = Solver(n_nodes, anchor, edges, initial_poses, "huber", width, max_iterations)
     run = _Verifier(detect, solver, threshold)
     found = run.agree()
-    unchecked = run.drop_untrusted_bridges()
+    unchecked = run.drop_untrusted_bridges(trust_bridges)
     sol = solver.solve(sorted(run.kept), found.poses, every_component=True)
     adjustment = adjustment_of(solver, sol, True, t0, every_component=True)
     states = run.states(unchecked)

@@ -1,4 +1,5 @@
-"""Deterministic terrestrial-laser-scanner simulator of street scenes (tests, samples, benchmarks).
+"""Deterministic terrestrial-laser-scanner simulator of street scenes and building interiors
+(tests, samples, benchmarks).
 
 Frames: the **world frame** (right-handed, z up, ground z = 0, the street along x) and each
 **scanner frame**; ``T_world_scan`` maps scanner points into the world. The same seed always
@@ -7,21 +8,25 @@ gives bit-identical output.
 
 from ndt_cli.sim.campaigns import Survey, block_loop, junction, route, shuffled, two_sites
 from ndt_cli.sim.ground import Ground
+from ndt_cli.sim.indoor import FloorWorld, floor_scene, scan_floor
 from ndt_cli.sim.scanner import make_sequence, scanner_pose, simulate_scan
 from ndt_cli.sim.scene import Scene, make_street
 from ndt_cli.sim.worlds import StreetWorld, passers_by, scan_street
 
 __all__ = [
+    "FloorWorld",
     "Ground",
     "Scene",
     "StreetWorld",
     "Survey",
     "block_loop",
+    "floor_scene",
     "junction",
     "make_sequence",
     "make_street",
     "passers_by",
     "route",
+    "scan_floor",
     "scan_street",
     "scanner_pose",
     "shuffled",

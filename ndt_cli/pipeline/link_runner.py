@@ -1,0 +1,194 @@
+"""The tasks of a campaign on its executor: scans prepared, links registered, each kept at once.
+
+A :class:`LinkRunner` owns what the tasks give: each scan's summary (and, for an executor
+that ships data, its prepared scan, the last :data:`CACHED_SCANS` of them), the scans that
+could not be read, and the links, each finished link saved in the link store
+(:mod:`ndt_cli.pipeline.links`) as soon as it comes. Links are keyed by their inputs (the
+scans' content and the configuration), so a link is registered once and, with ``resume``,
+taken from the store of an earlier run.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import OrderedDict
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+from functools import partial
+from pathlib import Path
+
+from ndt_cli.config.schema import Config
+from ndt_cli.ndt.prepare import PreparedScan
+from ndt_cli.ndt.result import Status
+from ndt_cli.pipeline.executors import Executor
+from ndt_cli.pipeline.links import Link, LinkStore, link_key
+from ndt_cli.pipeline.network import LinkKind, Pair, PlannedLink
+from ndt_cli.pipeline.scans import scan_names
+from ndt_cli.pipeline.solution import usable
+from ndt_cli.pipeline.tasks import LinkJob, ScanSummary, register_link, register_paths
+from ndt_cli.pipeline.tasks import summarise_scan as _summarise
+from ndt_cli.pipeline.workers import Failure
+
+progress = logging.getLogger("ndt_cli.progress")
+
+CACHED_SCANS = 48  # prepared scans kept between steps (others are read again)
+
+
+class LinkRunner:
+    """Prepares scans and registers links on ``executor`` (see the module docstring).
+
+    ``paths`` and ``hashes`` are the campaign's scans (files and content identities, in
+    campaign order): the runner reads them as they grow. ``cfg_text``: the configuration as
+    text, part of every key. ``on_link`` is called with each finished link.
+    """
+
+    def __init__(
+        self,
+        cfg: Config,
+        cfg_text: str,
+        executor: Executor,
+        store: LinkStore,
+        paths: list[Path],
+        hashes: list[str],
+        *,
+        resume: bool = False,
+        on_link: Callable[[Link], None] | None = None,
+    ) -> None:
+        self.cfg, self.cfg_text, self.executor, self.store = cfg, cfg_text, executor, store
+        self.paths, self.hashes = paths, hashes
+        self.resume, self.on_link = resume, on_link
+        self.summaries: dict[int, ScanSummary] = {}
+        self.prepared: OrderedDict[int, PreparedScan] = OrderedDict()
+        self.unreadable: dict[int, str] = {}
+        self.links: dict[Pair, Link] = {}
+        self.finished: set[str] = set()  # keys of the links registered (or taken) so far
+        self.reused: set[str] = set()  # keys of the links taken from the store
+
+    def scan_key(self, i: int) -> str:
+        """The key of scan ``i``'s summary in the store."""
+        return link_key(self.hashes[i], "", self.cfg_text)
+
+    def summarise(self, new: list[int]) -> None:
+        """The summary of each new scan: kept from an earlier run, or prepared now."""
+        todo = []
+        for i in new:
+            kept = self.store.load_scan(self.scan_key(i)) if self.resume else None
+            if kept is None:
+                todo.append(i)
+            else:
+                self.summaries[i] = ScanSummary(*kept)
+        if todo:
+            progress.info("preparing %d scan(s)", len(todo))
+            self.run(todo, [])
+
+    def register(
+        self, planned: Sequence[PlannedLink], both_ways: bool = False, classic: bool = False
+    ) -> None:
+        """Register the planned links not registered yet. With ``both_ways`` (never in the
+        ``classic`` chain), a found link that comes out suspect or degenerate is registered
+        the other way round too, and the better of the two kept (the registration is not
+        symmetric: a link at the margin of the quality gate may pass one way), so that which
+        scan is the target never decides a link of the network."""
+        fresh = [k for k in planned if k.pair not in self.links]
+        self.register_jobs([self._job(k) for k in fresh])
+        if classic or not both_ways:
+            return
+        marginal = (Status.SUSPECT, Status.DEGENERATE)
+        again = [k for k in planned if k.kind is LinkKind.FOUND and k.pair in self.links]
+        again = [k for k in again if self.links[k.pair].status in marginal]
+        self.register_jobs([self._job(PlannedLink(k.source, k.target, k.kind)) for k in again])
+
+    def register_jobs(self, jobs: list[LinkJob]) -> None:
+        """Run the jobs not finished yet (taken from the store where it has them)."""
+        jobs = [j for j in jobs if j.key not in self.finished]
+        if self.resume:
+            for job in jobs:
+                link = self.store.load(job.key)
+                if link is not None:
+                    self._finish(job, job.adopt(link), save=False)
+                    self.reused.add(job.key)
+        todo = [j for j in jobs if j.key not in self.finished]
+        for job in todo:
+            bad = self.unreadable.get(job.target) or self.unreadable.get(job.source)
+            if bad:
+                self._finish(job, job.failed(bad), save=False)
+        todo = [j for j in todo if j.key not in self.finished]
+        if not todo:
+            return
+        progress.info("registering %d link(s)", len(todo))
+        ships = self.executor.ships_data
+        need = {s for j in todo for s in (j.target, j.source)}
+        self.run(sorted(s for s in need if ships and s not in self.prepared), todo)
+
+    def run(self, prepare: list[int], jobs: list[LinkJob]) -> None:
+        """Prepare scans and register links on the executor, each link as soon as its two
+        scans are ready; a link that finishes is kept at once."""
+        ships = self.executor.ships_data
+        waiting = {job.pair: job for job in jobs}
+        tasks: dict = {
+            ("scan", i): partial(_summarise, self.paths[i], self.cfg, ships) for i in prepare
+        }
+
+        def ready(i: int) -> bool:
+            return i in self.prepared if ships else i in self.summaries
+
+        def start(*_: object) -> dict:
+            go = [p for p, j in waiting.items() if ready(j.target) and ready(j.source)]
+            return {("link", *p): self._task(waiting.pop(p)) for p in go}
+
+        tasks.update(start())
+        for key, value in self.executor.run(tasks, start):
+            if key[0] == "scan":
+                self._summarised(key[1], value)
+            else:
+                job = next(j for j in jobs if j.pair == key[1:])
+                if isinstance(value, Failure):  # the worker died or raised: this link fails
+                    self._finish(job, job.failed(value), save=False)
+                else:
+                    self._finish(job, value)
+        for job in waiting.values():  # a scan it needs could not be read
+            bad = self.unreadable.get(job.target) or self.unreadable.get(job.source) or "?"
+            self._finish(job, job.failed(bad), save=False)
+        while len(self.prepared) > CACHED_SCANS:
+            self.prepared.popitem(last=False)
+
+    def _job(self, k: PlannedLink) -> LinkJob:
+        key = link_key(self.hashes[k.target], self.hashes[k.source], self.cfg_text)
+        return LinkJob(0, k.target, k.source, key, k.kind)
+
+    def _task(self, job: LinkJob) -> Callable[[], Link]:
+        i, j = job.target, job.source
+        if self.executor.ships_data:
+            self.prepared.move_to_end(i)
+            self.prepared.move_to_end(j)
+            return partial(register_link, job, self.prepared[i], self.prepared[j], self.cfg)
+        return partial(register_paths, job, self.paths[i], self.paths[j], self.cfg)
+
+    def _summarised(self, i: int, value: ScanSummary | Failure) -> None:
+        if isinstance(value, Failure):
+            self.unreadable[i] = value
+            return
+        if value.prepared is not None:
+            self.prepared[i] = value.prepared
+        if i not in self.summaries:
+            self.summaries[i] = replace(value, prepared=None)
+            self.store.save_scan(self.scan_key(i), value.preview, value.sketch)
+
+    def _finish(self, job: LinkJob, link: Link, save: bool = True) -> None:
+        """Keep a finished link (the better of two ways round, see :meth:`register`)."""
+        self.finished.add(job.key)
+        kept = self.links.get(job.pair)
+        if kept is None or _rank(link) < _rank(kept):
+            self.links[job.pair] = link
+        if save:
+            names = scan_names(self.paths)
+            self.store.save(link, (names[link.target], names[link.source]))
+        if self.on_link:
+            self.on_link(link)
+
+
+def _rank(link: Link) -> tuple[int, float]:
+    """Which of two registrations of a pair is better: ok, then usable, then by score."""
+    rank = 0 if link.ok else 1 if usable(link) else 2
+    score = link.result.score_per_point if link.result is not None else 0.0
+    return rank, -score

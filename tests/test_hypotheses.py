@@ -1,0 +1,103 @@
+"""The network's choice among the poses of ambiguous links: poses and groups built by hand, the
+expected choice worked out from them."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ndt_cli.pipeline.graph import CHI2_6_999, Edge
+from ndt_cli.pipeline.hypotheses import Hypothesis, choose
+
+COV = np.diag([1e-6] * 3 + [1e-4] * 3)  # 0.06 deg, 1 cm
+
+
+def _pose(x: float, y: float, yaw_deg: float) -> np.ndarray:
+    a = np.radians(yaw_deg)
+    T = np.eye(4)
+    T[:2, :2] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
+    T[:2, 3] = x, y
+    return T
+
+
+TRUE = [_pose(0, 0, 0), _pose(8, 1, 30), _pose(15, -1, 100), _pose(24, 0, 200), _pose(31, 2, 5),
+        _pose(39, -1, 60)]  # fmt: skip
+FLIP = _pose(54, 0, 180)  # a corridor's symmetry: turned by 180 degrees about (27, 0)
+
+
+def _groups() -> tuple[list[int | None], list[np.ndarray]]:
+    """Nodes 0-2 in a group in node 0's frame, nodes 3-5 in another in node 3's frame."""
+    a = [np.linalg.inv(TRUE[0]) @ TRUE[v] for v in range(3)]
+    b = [np.linalg.inv(TRUE[3]) @ TRUE[v] for v in range(3, 6)]
+    return [0, 0, 0, 1, 1, 1], a + b
+
+
+def _hyp(link: int, choice: int, i: int, j: int, T: np.ndarray, evidence: float) -> Hypothesis:
+    return Hypothesis(link, choice, Edge(i, j, T, COV), evidence)
+
+
+def _true(i: int, j: int) -> np.ndarray:
+    return np.linalg.inv(TRUE[i]) @ TRUE[j]
+
+
+def _flipped(i: int, j: int) -> np.ndarray:
+    """The link as it reads when scan j's side of the corridor is the other way round."""
+    return np.linalg.inv(TRUE[i]) @ FLIP @ TRUE[j]
+
+
+def test_two_links_that_agree_on_a_placement_join_the_groups_whichever_pose_each_kept():
+    groups, poses = _groups()
+    hyps = {
+        7: [_hyp(7, 0, 0, 3, _true(0, 3), 1.0), _hyp(7, 1, 0, 3, _flipped(0, 3), 0.9)],
+        8: [
+            _hyp(8, 0, 1, 4, _pose(5, 5, 90) @ _true(1, 4), 1.0),
+            _hyp(8, 1, 1, 4, _true(1, 4), 0.7),
+        ],
+    }
+    got = choose(groups, poses, hyps, CHI2_6_999, 0.5)
+    assert got[7].chosen.choice == 0 and got[8].chosen.choice == 1
+    assert "2 links that agree" in got[8].reason
+
+
+def test_links_whose_rivals_agree_as_well_as_their_kept_poses_leave_the_groups_apart():
+    groups, poses = _groups()
+    hyps = {
+        k: [_hyp(k, 0, i, j, _true(i, j), 1.0), _hyp(k, 1, i, j, _flipped(i, j), 0.9)]
+        for k, (i, j) in {7: (0, 3), 8: (1, 4)}.items()
+    }
+    got = choose(groups, poses, hyps, CHI2_6_999, 0.5)
+    assert all(c.chosen is None and not c.rejected for c in got.values())
+    assert "could not choose" in got[7].reason
+    clear = choose(groups, poses, hyps, CHI2_6_999, 0.95)  # 1.8 < 0.95 * 2: the kept poses
+    assert clear[7].chosen.choice == 0 and clear[8].chosen.choice == 0
+
+
+def test_a_lone_ambiguous_link_between_two_groups_is_never_enough():
+    groups, poses = _groups()
+    hyps = {7: [_hyp(7, 0, 0, 3, _true(0, 3), 1.0), _hyp(7, 1, 0, 3, _flipped(0, 3), 0.6)]}
+    got = choose(groups, poses, hyps, CHI2_6_999, 0.5)
+    assert got[7].chosen is None and not got[7].rejected
+
+
+def test_within_a_group_the_pose_that_fits_is_chosen_and_none_fitting_is_rejected():
+    groups, poses = _groups()
+    hyps = {
+        5: [_hyp(5, 0, 0, 2, _flipped(0, 2), 1.0), _hyp(5, 1, 0, 2, _true(0, 2), 0.8)],
+        6: [
+            _hyp(6, 0, 3, 5, _flipped(3, 5), 1.0),
+            _hyp(6, 1, 3, 5, _pose(3, 0, 0) @ _true(3, 5), 0.9),
+        ],
+    }
+    got = choose(groups, poses, hyps, CHI2_6_999, 0.5)
+    assert got[5].chosen.choice == 1 and "rival 1" in got[5].reason
+    assert got[6].chosen is None and got[6].rejected
+
+
+def test_a_scan_on_no_firm_link_is_a_group_of_its_own():
+    groups, poses = _groups()
+    groups[5], poses[5] = None, None  # scan 5 has only ambiguous links
+    hyps = {
+        k: [_hyp(k, 0, i, 5, _true(i, 5), 1.0), _hyp(k, 1, i, 5, _pose(0, 7, 0) @ _true(i, 5), 0.8)]
+        for k, i in {1: 3, 2: 4}.items()
+    }
+    got = choose(groups, poses, hyps, CHI2_6_999, 0.5)
+    assert got[1].chosen.choice == 0 and got[2].chosen.choice == 0

@@ -1,0 +1,58 @@
+"""Candidates judged by what the scanners saw: which are refuted, which wins, which rival it.
+Expected values are worked out by hand from the rules of :mod:`ndt_cli.ndt.rivals`."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ndt_cli.ndt.coarse_to_fine import Ranked
+from ndt_cli.ndt.rivals import describe_rival, distinct, judge, refuted
+
+
+def _ranked(poses: list[tuple[float, float, float]], evidence: list[float]) -> Ranked:
+    n = len(poses)
+    return Ranked(np.array(poses, float), np.ones(n), np.array(evidence, float), np.ones(n, bool))
+
+
+@pytest.mark.parametrize(
+    ("shares", "ratio", "margin", "out"),
+    [
+        ([0.0, 0.002, 0.0031], 2.0, 0.003, [False, False, True]),  # least 0: the margin counts
+        ([0.01, 0.019, 0.021], 2.0, 0.003, [False, False, True]),  # twice the least counts
+        ([0.01, 0.012], 1.0, 0.003, [False, False]),  # within the margin
+        ([0.3, 0.0], 0.0, 0.003, [False, False]),  # switched off
+        ([np.nan, 0.2, 0.0], 2.0, 0.003, [False, True, False]),  # not measured: not refuted
+        ([np.nan, np.nan], 2.0, 0.003, [False, False]),  # nothing measured
+    ],
+)
+def test_a_candidate_is_refuted_when_it_conflicts_clearly_more_than_the_cleanest(
+    shares, ratio, margin, out
+):
+    assert refuted(np.array(shares), ratio, margin).tolist() == out
+
+
+def test_the_winner_is_the_most_evident_candidate_the_free_space_allows():
+    ranked = _ranked([(0, 0, 0), (10, 0, np.pi), (3.6, 0, 0), (0.2, 0.1, 0.01)], [3, 2.5, 2, 1.9])
+    got = judge(ranked, np.array([0.02, 0.0, 0.001, 0.019]), 2.0, 0.003, 0.5)
+    assert got.ranked.poses[0].tolist() == [10, 0, np.pi]  # the first two are refuted ...
+    assert got.refuted.tolist() == [False, True, False, True]  # ... (reordered, winner first)
+    assert got.rivals == (2,)  # slid by a room: 2 / 2.5 of the evidence, allowed
+    assert "2.0%" in got.note and "0.0%" in got.note  # what was given up and what is kept
+    alone = judge(ranked, np.array([0.0, 0.05, 0.06, 0.07]), 2.0, 0.003, 0.5)
+    assert alone.rivals == () and alone.note == ""
+
+
+def test_a_candidate_below_the_evidence_share_or_at_the_same_place_is_no_rival():
+    ranked = _ranked([(0, 0, 0), (0.3, 0.2, 0.02), (0, 0, np.pi), (8, 0, 0)], [3, 2.9, 2.8, 1.4])
+    got = judge(ranked, np.zeros(4), 2.0, 0.003, 0.5)
+    assert got.rivals == (2,)  # 1: the same pose found twice; 3: below half the evidence
+    blind = judge(ranked, np.full(4, np.nan), 2.0, 0.003, 0.95)  # no free space: evidence
+    assert blind.rivals == () and not blind.refuted.any()
+    assert distinct(np.array([0, 0, 0]), np.array([0.6, 0, 0]))
+    assert not distinct(np.array([0, 0, 0]), np.array([0.3, 0.3, np.radians(2.0)]))
+
+
+def test_a_rival_is_described_by_its_turn_and_distance():
+    text = describe_rival(np.array([1.0, 2.0, 0.1]), np.array([4.0, 6.0, 0.1 - np.pi]), 0.8, 0.0)
+    assert "turned -180.0 deg" in text and "5.00 m away" in text and "0.80 of the" in text
