@@ -40,7 +40,7 @@ def _scans(tmp_path: Path, n: int = 2) -> list[str]:
     ("control", "extra", "needle"),
     [
         ("scan_7.xyz,1,2,3\n", [], "line 1: no scan named 'scan_7.xyz'"),
-        ("scan_0.xyz,1,2\n", [], "line 1: expected 'scan,x,y,z'"),
+        ("scan_0.xyz,1,2\n", [], "line 1: 3 fields; expected 'scan,x,y,z'"),
         ("scan_0.xyz,1,2,3,-1,1\n", [], "standard deviations must be positive"),
         ("scan_0.xyz,1,2,3\n", ["--crs", "EPSG:999999"], "--crs 'EPSG:999999' is not"),
         ("scan_0.xyz,1,2,3\n", ["--no-adjust"], "--control needs the adjustment"),
@@ -62,6 +62,69 @@ def test_a_bad_control_option_is_one_line_and_exit_2_before_any_work(
     lines = res.output.strip().splitlines()
     assert len(lines) == 1 and needle in lines[0], res.output
     assert "Traceback" not in res.output
+    assert not (tmp_path / "out").exists()
+
+
+UTM = (
+    "scan_0.xyz,499959.5266,5399975.2489,101.6000,,\nscan_1.xyz,499978.2599,5399990.0355,101.6,,\n"
+)
+HEADER = "scan,x,y,z,sigma_xy,sigma_z\n"
+
+
+@pytest.mark.parametrize(
+    ("control", "crs", "needle"),
+    [
+        (  # Excel in a German locale: decimal commas, the row has seven fields
+            HEADER + "scan_0.xyz,499959,5266,5399975.2489,101.6,,\n",
+            "EPSG:25832",
+            "line 2: 7 fields where the header has 6 (a decimal comma? write 499959.5266)",
+        ),
+        (  # northing first, as Gauss-Krueger's Hochwert or CS92 users write it
+            "scan_0.xyz,5399975.2489,499959.5266,101.6,,\n",
+            "EPSG:25832",
+            "line 1: x, y (5399975.249, 499959.527) lie outside the area of ETRS89 / UTM zone "
+            "32N (EPSG:25832), and inside it with columns x and y swapped",
+        ),
+        (  # y and z swapped: a height in the millions
+            "scan_0.xyz,499959.5266,101.6,5399975.2489,,\n",
+            None,
+            "line 1: column z: 5,399,975.249 m is no height",
+        ),
+        (UTM, "EPSG:2056", "line 1: x, y (499959.527, 5399975.249) lie outside the area of "),
+        (  # a German habit: the zone number before the easting
+            "scan_0.xyz,32499959.5266,5399975.2489,101.6,,\n",
+            "EPSG:25832",
+            "inside it as 499959.527: the easting carries a zone number (32)? give it without",
+        ),
+        ("scan_0.xyz,9.0,48.75,400\n", "EPSG:25832", "degrees of longitude and latitude?"),
+        (UTM, "EPSG:31467", "DHDN / 3-degree Gauss-Kruger zone 3 (EPSG:31467): at 27.44°W"),
+        (UTM, "EPSG:5514", "S-JTSK / Krovak East North (EPSG:5514): at 29.20°E 73.44°N, not in"),
+        (UTM, "EPSG:4978", "--crs 'EPSG:4978' is geocentric"),
+        (UTM, "EPSG:4936", "--crs 'EPSG:4936' is geocentric"),
+        (UTM, "EPSG:5783", "--crs 'EPSG:5783' holds heights only"),
+        (UTM, "EPSG:3857", "its grid scale at the stations is 1.38"),
+        ("scan_0.xyz,1e300,1e300,1e300\nscan_1.xyz,1,2,3\n", "EPSG:25832", "column x: 1e+300"),
+        ("scan_0.xyz,1,2,3,1e300,1e300\n", None, "line 1: sigma_xy 1e+300 m is out of range"),
+    ],
+)
+@pytest.mark.parametrize("tool", ["chain", "watch"])
+def test_control_that_cannot_hold_is_refused_before_any_scan_is_read(
+    tmp_path, control, crs, needle, tool
+):
+    """Each is one line naming the file, its line and column, exit 2, nothing written; the
+    stand-in scans are not scans at all: they are never read."""
+    files = _scans(tmp_path)
+    (tmp_path / "control.csv").write_text(control, encoding="utf-8")
+    args = ["--out", str(tmp_path / "out"), "--control", str(tmp_path / "control.csv")]
+    args += ["--crs", crs] if crs else []
+    if tool == "chain":
+        res = runner.invoke(chain_app, [*files, *args])
+    else:
+        res = runner.invoke(watch_app, [str(tmp_path), *args, "--exit-when-idle", "0.1"])
+    lines = res.output.strip().splitlines()
+    assert res.exit_code == EXIT_INPUT, res.output
+    assert len(lines) == 1 and needle in lines[0], res.output
+    assert "control.csv" in lines[0] or "--crs" in lines[0]
     assert not (tmp_path / "out").exists()
 
 
@@ -160,3 +223,20 @@ def test_the_grid_scale_is_utms_point_scale_times_the_height_reduction(easting):
     got = grid_scale(crs_wkt("EPSG:25832"), np.array([easting, 5_400_000.0, h]))
     assert abs(got - expected) < 1e-6
     assert grid_scale(crs_wkt("EPSG:25832+5783"), np.array([easting, 5_400_000.0, h])) == got
+
+
+def test_a_station_named_by_a_file_name_two_folders_share_is_refused(tmp_path):
+    """north/scan.xyz and south/scan.xyz: 'scan.xyz' names neither (the last one used to be
+    taken, silently); the outputs' names do."""
+    files = []
+    for side in ("north", "south"):
+        (tmp_path / side).mkdir()
+        files.append(tmp_path / side / "scan.xyz")
+        files[-1].write_text("0 0 0\n1 0 0\n0 1 0\n")
+    (tmp_path / "control.csv").write_text("scan.xyz,1,2,3\n")
+    args = [*map(str, files), "--out", str(tmp_path / "out"), "--control"]
+    res = runner.invoke(chain_app, [*args, str(tmp_path / "control.csv")])
+    assert res.exit_code == EXIT_INPUT, res.output
+    needle = "line 1: 'scan.xyz' names 2 scans (north/scan.xyz, south/scan.xyz): name one as"
+    assert needle in res.output and len(res.output.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()

@@ -32,7 +32,8 @@ except ImportError:  # pragma: no cover - typer on the standalone click package
 
 EXIT_CODES = (
     "Exit codes: 0 success; 1 a result is not trustworthy (suspect, degenerate, not converged, "
-    "no overlap, failed; ndt-chain: any scan not ok); 2 bad input, config or output path; "
+    "no overlap, failed; ndt-chain: any scan not ok, or --control given and the campaign not "
+    "georeferenced); 2 bad input, config or output path; "
     "130 stopped by Ctrl-C."
 )
 FORMATS = (

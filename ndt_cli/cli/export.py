@@ -40,8 +40,9 @@ _HELP = "\n\n".join(
         "unposed scans always. A campaign that the network split exports its anchor's "
         "cluster (0), or the cluster --cluster names, in the frame of that cluster's first "
         "scan.",
-        "Exit codes: 0 written; 2 bad input (not a result folder, a scan file missing) or an "
-        "output that cannot be written; 130 stopped by Ctrl-C.",
+        "Exit codes: 0 written; 2 bad input (not a result folder, a scan file missing, a result "
+        "its --control did not georeference) or an output that cannot be written; 130 stopped "
+        "by Ctrl-C.",
         "Examples:\n\n"
         "  ndt-export street/ --out street.laz\n\n"
         "  ndt-export street/ --out street_2cm.laz --voxel 0.02\n\n"

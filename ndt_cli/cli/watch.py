@@ -159,6 +159,7 @@ def _run(cfg: Config, opts: _Options) -> bool:
     from ndt_cli.pipeline.campaign import Campaign
     from ndt_cli.pipeline.executors import ExecutorKind, make_executor
     from ndt_cli.pipeline.watch import FolderWatch
+    from ndt_cli.report.world import closing_lines
 
     signal.signal(signal.SIGTERM, _interrupt)
     pool = make_executor(ExecutorKind.LOCAL, opts.jobs)
@@ -178,6 +179,8 @@ def _run(cfg: Config, opts: _Options) -> bool:
             time.sleep(opts.interval)
     finally:
         campaign.close()
+    for line in closing_lines(result) if result is not None else ():
+        typer.echo(line, err=True)
     return result is not None and result.ok
 
 
@@ -191,24 +194,27 @@ def _add(campaign: Campaign, scan: Landed, cfg: Config, out: Path) -> ChainResul
 
     from ndt_cli.report.chain_outputs import write_chain_outputs
     from ndt_cli.report.reasons import with_named_reasons
+    from ndt_cli.report.world import first_scan_role
 
     t0 = time.perf_counter()
     campaign.add_scans([scan.path])
     result = with_named_reasons(campaign.result())
     write_chain_outputs(out, result, cfg, time.perf_counter() - t0, command_line())
     report = campaign.report(len(result.scans) - 1, result)
-    typer.echo(_line(report, time.time() - scan.mtime, time.perf_counter() - t0), err=True)
+    role = first_scan_role(result)
+    typer.echo(_line(report, time.time() - scan.mtime, time.perf_counter() - t0, role), err=True)
     return result
 
 
-def _line(report: ScanReport, since_landing: float, took: float) -> str:
-    """One log line: the scan, where it is, what it links to, its status, the times."""
+def _line(report: ScanReport, since_landing: float, took: float, role: str) -> str:
+    """One log line: the scan, where it is, what it links to, its status, the times; the first
+    scan's ``role`` in the world frame."""
     from ndt_cli.pipeline.verify import NodeStatus
 
     name, status = report.name, report.status
     timing = f"{took:.1f} s ({since_landing:.1f} s since it landed)"
     if report.index == 0 and not report.linked:
-        return f"{name}: the first scan, it defines the world frame; {timing}"
+        return f"{name}: the first scan, {role}; {timing}"
     if status is NodeStatus.UNPOSED and not report.linked:
         why = f": {report.reason}" if report.reason else ""
         return f"{name}: FITS NOWHERE{why}; scan again here? {timing}"

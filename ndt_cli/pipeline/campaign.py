@@ -39,7 +39,6 @@ from ndt_cli.errors import UserInterruptError, caused_by_interrupt
 from ndt_cli.ndt.overlap import CoarseMatch, coarse_match
 from ndt_cli.pipeline import placement
 from ndt_cli.pipeline.control import Station, matched
-from ndt_cli.pipeline.datum import WorldFrame
 from ndt_cli.pipeline.discovery import (
     HINTS,
     Placed,
@@ -196,10 +195,10 @@ class Campaign:
         )
 
     def _world_system(self, solution: NetworkSolution) -> dict[str, Any]:
-        """The coordinate system of the world and its scale, when control made the world."""
-        if solution.datum is None or solution.datum.frame is not WorldFrame.CONTROL:
-            return {}
-        return {"crs": self.net.crs, "grid_scale": self.net.grid_scale}
+        """The control's stations and coordinate system, and the grid scale when applied."""
+        applied = solution.datum is not None and solution.datum.frame.from_control
+        scale = self.net.grid_scale if applied else 1.0
+        return {"stations": self.net.stations, "crs": self.net.crs, "grid_scale": scale}
 
     def report(self, index: int, result: ChainResult) -> ScanReport:
         """What the network made of scan ``index`` in ``result``."""

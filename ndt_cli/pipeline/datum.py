@@ -16,12 +16,16 @@ its coordinates; its heading stays the anchor's (one point cannot give it).
 With two or more stations the control enters the adjustment: each station is a prior on its
 scan's position (a GTSAM ``GPSFactor`` with its standard deviations, under a Huber kernel),
 each scan's vertical a prior on its tilt, the kept links between factors as before, and nothing
-else holds the frame. A station whose misfit exceeds its standard deviations (chi-square,
-3 DOF, p = 0.999) is rejected, worst first, and the network solved again: a wrong point number
-or a GNSS fix off by decimetres does not bend the network. With two stations left that
-disagree, which one is wrong cannot be told: both are rejected. The world is then the control's
-coordinate system (the graph works in it less the stations' mean, rounded, so that its numbers
-stay small).
+else holds the frame. The adjustment starts from the largest group of stations that agree with
+one placement of the levelled network (:mod:`ndt_cli.pipeline.consensus`): two stations with
+swapped numbers among five do not turn it onto them; two groups as large leave it unplaced. A
+station whose misfit exceeds its standard deviations (chi-square, 3 DOF, p = 0.999) is
+rejected, worst first, and the network solved again: a wrong point number or a GNSS fix off by
+decimetres does not bend the network; one outside the group within the bound is taken in. With
+two stations left that disagree, which one is wrong cannot be told: both are rejected. The
+world is then the control's coordinate system (the graph works in it less the stations' mean,
+rounded, so that its numbers stay small). Stations that cannot place the network leave it
+levelled, and :func:`not_georeferenced` says why.
 
 A map projection's coordinates are not at ground scale: UTM shrinks distances by 0.9996 on the
 central meridian (40 cm per km), heights above the ellipsoid add R / (R + h). With the
@@ -41,7 +45,8 @@ import numpy as np
 
 from ndt_cli.core.transforms import levelling_rotation, rotation4, translation
 from ndt_cli.pipeline.adjust import Solver
-from ndt_cli.pipeline.control import Control
+from ndt_cli.pipeline.consensus import Group, largest_group, likely_cause
+from ndt_cli.pipeline.control import Control, Station, unmatched
 
 VERTICAL_SIGMA_DEG = {  # how well each way of finding a scan's vertical finds it (1 sigma)
     "scanner": 0.005,  # a dual-axis compensator
@@ -51,6 +56,7 @@ VERTICAL_SIGMA_DEG = {  # how well each way of finding a scan's vertical finds i
     "given": 1.0,  # ground.z: no levelling at all
 }
 CHI2_3_999 = 16.266  # chi-square quantile, 3 degrees of freedom, p = 0.999
+OUTSIDE = "its scan is not in the anchor's cluster"
 GEOREFERENCED_M = 10_000.0  # a scan in its scanner's frame stands within its range of it
 
 
@@ -94,6 +100,7 @@ class Datum:
     frame: WorldFrame
     controls: tuple[ControlFit, ...]
     vertical_sigma_deg: float
+    problem: str = ""  # why stations that could be used did not make the world ('' if none)
 
 
 @dataclass(frozen=True)
@@ -190,25 +197,15 @@ def _datum(
     levelled = {v: W @ T for v, T in cluster.poses.items()}
     frame = WorldFrame.GEOREFERENCED if georeferenced else WorldFrame.LEVELLED
     usable = [c for c in controls if c.scan in cluster.poses]
-    fits = [ControlFit(c, None, False, "its scan is not in the anchor's cluster") for c in controls]
-    fits = [f for f in fits if f.control not in usable]
+    fits = [ControlFit(c, None, False, OUTSIDE) for c in controls if c.scan not in cluster.poses]
     if len(usable) >= 2:
-        adjusted = _with_control(cluster, levelled, usable, solver, kept)
+        adjusted, problem, why = _controlled(cluster, levelled, usable, solver, kept)
         if adjusted is not None:
             poses, covariances, used = adjusted
-            fits += [_fit(c, poses, cluster, c in used) for c in usable]
+            fits += [_fit(c, poses, cluster, c.scan in used) for c in usable]
             return Datum(poses, covariances, WorldFrame.CONTROL, tuple(fits), sigma)
-        fits += [
-            ControlFit(
-                c,
-                None,
-                False,
-                "the stations disagree beyond their standard "
-                "deviations and which is wrong cannot be told",
-            )
-            for c in usable
-        ]
-        return Datum(levelled, {}, frame, tuple(fits), sigma)
+        fits += [ControlFit(c, None, False, why[c.scan]) for c in usable]
+        return Datum(levelled, {}, frame, tuple(fits), sigma, problem)
     if len(usable) == 1:
         c = usable[0]
         shift = translation(c.xyz - _scanner(levelled[c.scan], cluster.reductions[c.scan]))
@@ -216,6 +213,85 @@ def _datum(
         fits.append(_fit(c, poses, cluster, True, "one station: position only"))
         return Datum(poses, {}, WorldFrame.CONTROL_HEADING, tuple(fits), sigma)
     return Datum(levelled, {}, frame, tuple(fits), sigma)
+
+
+Adjusted = tuple[dict[int, np.ndarray], dict[int, np.ndarray], set[int]]
+
+
+def _controlled(
+    cluster: Cluster,
+    levelled: dict[int, np.ndarray],
+    stations: Sequence[Control],
+    solver: Solver,
+    kept: Sequence[int],
+) -> tuple[Adjusted | None, str, dict[int, str]]:
+    """The cluster adjusted with its stations, from the largest group of them that agrees
+    (:mod:`ndt_cli.pipeline.consensus`); or None, why the stations cannot place it and, per
+    station (by scan), why it is not used."""
+    p = np.array([_scanner(levelled[c.scan], cluster.reductions[c.scan]) for c in stations])
+    q = np.array([c.xyz for c in stations])
+    s_xy = np.array([c.sigma_xy for c in stations])
+    s_z = np.array([c.sigma_z for c in stations])
+    group = largest_group(p, q, s_xy, s_z)
+    unplaced = _why_unplaced(group, [c.name for c in stations], p, q, s_xy, s_z)
+    if unplaced is not None:
+        problem, why = unplaced
+        return None, problem, dict.fromkeys((c.scan for c in stations), why)
+    members = [stations[k] for k in group.members]
+    others = [c for k, c in enumerate(stations) if k not in group.members]
+    adjusted = _with_control(cluster, levelled, members, others, solver, kept)
+    if adjusted is None:
+        why = "the two stations left disagree beyond their standard deviations"
+        return None, f"{why}: which is wrong cannot be told", {c.scan: why for c in stations}
+    return adjusted, "", {}
+
+
+def _why_unplaced(
+    group: Group,
+    names: Sequence[str],
+    p: np.ndarray,
+    q: np.ndarray,
+    s_xy: np.ndarray,
+    s_z: np.ndarray,
+) -> tuple[str, str] | None:
+    """Why the largest ``group`` of the stations ``names`` cannot place the network (arguments
+    of :func:`~ndt_cli.pipeline.consensus.largest_group`), and what each station is told; None
+    when it can: most stations agree, and no group as large places it elsewhere."""
+    n, k = len(names), len(group.members)
+    cause = likely_cause(p, q, s_xy, s_z, k) if k < n else ""
+    if cause:
+        return (
+            f"{k} of the {n} stations agree with the network as given, {cause}",
+            "the stations fit the network only if changed",
+        )
+    if group.rivals:
+        a, b = (", ".join(names[i] for i in g) for g in (group.members, group.rivals))
+        return (
+            f"the stations form groups that place the network differently, {k} against "
+            f"{len(group.rivals)} ({a} | {b}): which is right cannot be told",
+            f"in one of two groups, {k} against {len(group.rivals)}: which is right cannot be told",
+        )
+    if k < 2:
+        return _no_two_agree(p, q), "agrees with no other station"
+    if 2 * k <= n:
+        agree = ", ".join(names[i] for i in group.members)
+        return (
+            f"only {k} of the {n} stations agree with one placement of the network ({agree}): "
+            "not a majority, which are right cannot be told",
+            "the stations that agree are not the majority",
+        )
+    return None
+
+
+def _no_two_agree(p: np.ndarray, q: np.ndarray) -> str:
+    """Why no two stations agree with the network: of two, their distances."""
+    if len(p) == 2:
+        dq, dp = np.linalg.norm(q[1] - q[0]), np.linalg.norm(p[1] - p[0])
+        return (
+            f"the two stations are {dq:.2f} m apart, their scanners {dp:.2f} m: which is wrong "
+            "cannot be told"
+        )
+    return f"no two of the {len(p)} stations agree with the network"
 
 
 def _fit(
@@ -290,46 +366,71 @@ def _solve_controlled(
     return {v: values.atPose3(v).matrix() for v in start}, graph, values
 
 
-def _worst(
-    stations: list[Control], poses: dict[int, np.ndarray], cluster: Cluster
-) -> tuple[Control, float]:
-    """The station whose misfit is largest, and its chi-square (3 DOF)."""
-    chi2 = []
-    for c in stations:
-        r = (_scanner(poses[c.scan], cluster.reductions[c.scan]) - c.xyz) / c.sigmas
-        chi2.append(float(r @ r))
-    k = int(np.argmax(chi2))
-    return stations[k], chi2[k]
+def _chi2(c: Control, poses: dict[int, np.ndarray], cluster: Cluster) -> float:
+    """A station's misfit: its residual over its sigmas, squared (chi-square, 3 DOF)."""
+    r = (_scanner(poses[c.scan], cluster.reductions[c.scan]) - c.xyz) / c.sigmas
+    return float(r @ r)
 
 
 def _with_control(
     cluster: Cluster,
     levelled: dict[int, np.ndarray],
-    stations: Sequence[Control],
+    group: Sequence[Control],
+    others: Sequence[Control],
     solver: Solver,
     kept: Sequence[int],
-) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray], list[Control]] | None:
-    """The anchor's cluster adjusted with its stations (see the module docstring): the poses
-    and covariances in the control's coordinates and the stations used; None when two
-    stations are left and they disagree."""
-    used = list(stations)
-    origin = np.round(np.mean([c.xyz for c in used], axis=0))
-    local = [Control(c.scan, c.name, c.xyz - origin, c.sigma_xy, c.sigma_z) for c in used]
-    by_scan = {c.scan: c for c in local}
-    A = _heading_fit(levelled, local, cluster)
+) -> Adjusted | None:
+    """The anchor's cluster adjusted with its stations (see the module docstring), from the
+    ``group`` that agrees: the worst station above the chi-square bound left out, one at a
+    time, and each of the ``others`` within it taken in. The poses and covariances in the
+    control's coordinates and the scans of the stations used; None when two stations are
+    left and they disagree."""
+    origin = np.round(np.mean([c.xyz for c in group], axis=0))
+    local = {c.scan: replace(c, xyz=c.xyz - origin) for c in (*group, *others)}
+    A = _heading_fit(levelled, [local[c.scan] for c in group], cluster)
     start = {v: A @ T for v, T in levelled.items()}
+    used, dropped = [c.scan for c in group], set()
     while True:
-        active = [by_scan[c.scan] for c in used]
+        active = [local[s] for s in used]
         poses, graph, values = _solve_controlled(cluster, start, active, solver, kept)
         poses, graph, values = _solve_controlled(cluster, poses, active, solver, kept)
-        worst, chi2 = _worst(active, poses, cluster)
-        if chi2 <= CHI2_3_999:
-            break
-        if len(used) <= 2:
-            return None
-        used = [c for c in used if c.scan != worst.scan]
         start = poses
+        misfits = {s: _chi2(c, poses, cluster) for s, c in local.items()}
+        worst = max(used, key=misfits.__getitem__)
+        if misfits[worst] > CHI2_3_999:
+            if len(used) <= 2:
+                return None
+            used.remove(worst)
+            dropped.add(worst)
+            continue
+        back = [s for s in local if s not in used and s not in dropped and misfits[s] <= CHI2_3_999]
+        if not back:
+            break
+        used += back
     marginals = solver.g.Marginals(graph, values)
     covariances = {v: marginals.marginalCovariance(v) for v in poses}
     shift = translation(origin)
-    return {v: shift @ T for v, T in poses.items()}, covariances, used
+    return {v: shift @ T for v, T in poses.items()}, covariances, set(used)
+
+
+def not_georeferenced(
+    datum: Datum | None, stations: Sequence[Station], names: Sequence[str]
+) -> str:
+    """Why the world is not the control's coordinates as a control file of ``stations`` asks
+    ('' when it is, or without control): fewer than two of its stations in use (fewer than
+    one, for a file of one station). ``names``: the campaign's scans, as the outputs name them."""
+    if not stations:
+        return ""
+    need = min(2, len(stations))
+    fits = datum.controls if datum is not None else ()
+    used = sum(f.used for f in fits)
+    if used >= need:
+        return ""
+    why = [datum.problem] if datum is not None and datum.problem else []
+    if datum is None:
+        why.append("the anchor has no link yet")
+    outside = [f.control.name for f in fits if f.reason == OUTSIDE]
+    if outside:
+        why.append(f"{len(outside)} on scans no link ties to the anchor ({', '.join(outside)})")
+    why += [f"line {s.line}: {problem}" for s, problem in unmatched(stations, names)]
+    return f"{used} of {len(stations)} control station(s) in use, {need} needed: " + "; ".join(why)

@@ -9,12 +9,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from ndt_cli.errors import ConfigError, InputError
-from ndt_cli.io.crs import check_metres, crs_wkt, grid_scale
+from ndt_cli.io.crs import crs_wkt
 from ndt_cli.pipeline.campaign import NetworkOptions
-from ndt_cli.pipeline.control import matched, read_stations
+from ndt_cli.pipeline.control import check_in_system, matched, read_stations
 from ndt_cli.pipeline.network import read_pairs
 from ndt_cli.pipeline.scans import natural_sort, scan_names
 
@@ -92,9 +90,8 @@ def network_options(
         raise ConfigError("--control needs the adjustment (not --no-adjust)")
     wkt = crs_wkt(crs) if crs is not None else ""
     scale = 1.0
-    if wkt:
-        check_metres(wkt, crs)
-        scale = grid_scale(wkt, np.mean([s.xyz for s in stations], axis=0))
+    if wkt and control is not None:
+        scale = check_in_system(stations, wkt, crs, control)
     return NetworkOptions(neighbours, adjust, radius, user, stations, wkt, scale)
 
 

@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ndt_cli.pipeline.control import Station
+from ndt_cli.pipeline.datum import not_georeferenced
 from ndt_cli.pipeline.links import Link
 from ndt_cli.pipeline.solution import NetworkSolution
 from ndt_cli.pipeline.verify import EdgeState, NodeStatus
@@ -27,8 +29,9 @@ class ChainResult:
     previews: dict[int, np.ndarray]  # thinned slice points (x, y, z) per scan, scan frame
     reused: tuple[int, ...] = ()  # links taken from an earlier run (--resume)
     radius: float = float("nan")  # m, the radius links were planned within
-    crs: str = ""  # the world's coordinate system as WKT, when control gave it
+    crs: str = ""  # the control's coordinate system as WKT, when given (--crs)
     grid_scale: float = 1.0  # its grid distance over ground distance, applied at the scanners
+    stations: tuple[Station, ...] = ()  # the control file's stations (none without control)
 
     @property
     def poses(self) -> tuple[np.ndarray | None, ...]:
@@ -36,9 +39,16 @@ class ChainResult:
         return self.solution.poses
 
     @property
+    def not_georeferenced(self) -> str:
+        """Why the world is not the control's coordinates although control was given ('' when
+        it is, or without control)."""
+        return not_georeferenced(self.solution.datum, self.stations, self.names)
+
+    @property
     def ok(self) -> bool:
-        """Every scan has a trustworthy pose in the anchor's frame (one cluster)."""
-        return all(s.anchored for s in self.solution.scans)
+        """Every scan has a trustworthy pose in the anchor's frame (one cluster), and that
+        frame is the control's when control was given."""
+        return all(s.anchored for s in self.solution.scans) and not self.not_georeferenced
 
 
 @dataclass(frozen=True)

@@ -246,13 +246,23 @@ def result_crs(folder: Path) -> tuple[RawVlr, ...] | None:
     if not path.exists():
         return None
     world = read_json_object(path, "summary").get("world")
+    if isinstance(world, dict) and world.get("georeferenced") is False:
+        raise InputError(
+            f"not georeferenced: {world.get('not_georeferenced')}; correct the control and "
+            "run ndt-chain again",
+            path,
+        )
     frame = _member(WorldFrame, world.get("frame")) if isinstance(world, dict) else None
     if frame is None or not frame.from_control:
         return None
     wkt = world.get("crs")
     if not wkt or frame is not WorldFrame.CONTROL:
-        why = "one station: its heading is the anchor's" if wkt else "of no named CRS"
-        log.warning("%s: the world is the control's frame, %s: no CRS written", folder, why)
+        why = (
+            "in the CRS of --crs at one station only, its heading the anchor's"
+            if wkt
+            else "the control's coordinates, of no named CRS"
+        )
+        log.warning("%s: the world is %s: no CRS written", folder, why)
         return ()
     if not isinstance(wkt, str):
         raise InputError("summary.json: world.crs is not a WKT text", path)

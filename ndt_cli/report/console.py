@@ -77,7 +77,9 @@ def print_chain_summary(result: ChainResult, console: Any) -> None:
         console.print(scans)
     _print_controls(result, console)
     n_ok = len(sol.scans) - len(bad)
-    console.print(f"{n_ok} of {len(sol.scans)} scans ok" + (" (adjusted)" if sol.adjusted else ""))
+    georeferenced = "; NOT GEOREFERENCED (see above)" if result.not_georeferenced else ""
+    adjusted = " (adjusted)" if sol.adjusted else ""
+    console.print(f"{n_ok} of {len(sol.scans)} scans ok{adjusted}{georeferenced}")
 
 
 def _print_controls(result: Any, console: Any) -> None:
@@ -98,7 +100,7 @@ def _print_controls(result: Any, console: Any) -> None:
                 "yes" if r["used"] else f"no: {r['reason']}",
             )
         console.print(table)
-    console.print(world_line(result))
+    console.print(world_line(result), soft_wrap=False)  # long: wrapped at words
 
 
 def print_evaluation(ev: Any, console: Any) -> None:

@@ -55,9 +55,10 @@ def chain_report(
     line that ran it ('' for a library call: not shown)."""
     sol = result.solution
     not_ok = [result.names[k] for k, s in enumerate(sol.scans) if s.status is not NodeStatus.OK]
-    verdict = Verdict(
-        result.ok, "" if result.ok else f"{len(not_ok)} scan(s) not ok: {', '.join(not_ok)}"
-    )
+    why = [f"{len(not_ok)} scan(s) not ok: {', '.join(not_ok)}"] if not_ok else []
+    if result.not_georeferenced:
+        why.append(f"not georeferenced: {result.not_georeferenced}")
+    verdict = Verdict(result.ok, "; ".join(why))
     states = [f.state.value for f in sol.links]
     solved = "adjusted; " if sol.adjusted else "chained, not adjusted; "
     summary = (
@@ -93,7 +94,7 @@ def _control_rows(result: ChainResult) -> tuple[tuple[str, str], ...]:
         res = r["residual_cm"]
         misfit = "" if res is None else "; adjusted - given " + " ".join(f"{v:+.1f}" for v in res)
         used = "used" if r["used"] else f"not used: {r['reason']}"
-        rows.append((f"control {r['scan']}", f"{given} m{misfit} cm; {used}"))
+        rows.append((f"control {r['scan']}", f"{given} m{misfit}{' cm' if misfit else ''}; {used}"))
     return tuple(rows)
 
 
