@@ -101,3 +101,34 @@ def test_a_scan_on_no_firm_link_is_a_group_of_its_own():
     }
     got = choose(groups, poses, hyps, CHI2_6_999, 0.5)
     assert got[1].chosen.choice == 0 and got[2].chosen.choice == 0
+
+
+def _singletons() -> tuple[list[int | None], list[np.ndarray | None]]:
+    """Nodes 3, 4, 5 on no firm link (each a group of its own); 0-2 in a group."""
+    groups, poses = _groups()
+    for v in (3, 4, 5):
+        groups[v], poses[v] = None, None
+    return groups, poses
+
+
+def test_a_triangle_that_closes_with_one_choice_joins_its_three_scans():
+    groups, poses = _singletons()
+    hyps = {
+        1: [_hyp(1, 0, 3, 4, _true(3, 4), 1.0)],  # a link no cycle of firm links checks
+        2: [_hyp(2, 0, 4, 5, _true(4, 5), 1.0)],
+        3: [_hyp(3, 0, 3, 5, _flipped(3, 5), 1.0), _hyp(3, 1, 3, 5, _true(3, 5), 0.6)],
+    }
+    got = choose(groups, poses, hyps, CHI2_6_999, 0.5)
+    assert [got[k].chosen.choice for k in (1, 2, 3)] == [0, 0, 1]
+    assert "close a cycle" in got[3].reason
+
+
+def test_a_triangle_that_closes_as_well_with_rivals_stays_undecided():
+    groups, poses = _singletons()
+    hyps = {  # every link may be read with scan 5 on the other side of the corridor
+        1: [_hyp(1, 0, 3, 4, _true(3, 4), 1.0)],
+        2: [_hyp(2, 0, 4, 5, _true(4, 5), 1.0), _hyp(2, 1, 4, 5, _flipped(4, 5), 0.9)],
+        3: [_hyp(3, 0, 3, 5, _true(3, 5), 1.0), _hyp(3, 1, 3, 5, _flipped(3, 5), 0.9)],
+    }
+    got = choose(groups, poses, hyps, CHI2_6_999, 0.5)
+    assert all(c.chosen is None for c in got.values())

@@ -16,9 +16,11 @@ rivals) is a hypothesis judged against the *firm* links, those without rivals:
   lies in the other's frame. A placement is chosen when at least two links agree on it (each
   with one of its poses) and no other placement has as many links, unless the agreeing poses
   have clearly more evidence (the sum of their shares of their links' evidence; clearly: the
-  other has less than ``ambiguity`` of it). The groups then join and the search starts over. A
-  lone ambiguous link between two groups is never enough: it leaves the scans beyond it
-  suspect, its rivals named.
+  other has less than ``ambiguity`` of it). The groups then join and the search starts over.
+- **Around three groups**, each pair joined by one link: a choice of one pose per link that
+  closes the triangle joins the three, when no other choice closes it with as much evidence.
+- A lone link between two groups on no such cycle is never enough: it leaves the scans beyond
+  it suspect, its rivals named.
 
 The chosen poses become links of the network like any other; the links left ambiguous do not.
 Frames as in :mod:`ndt_cli.pipeline.graph`: nodes' poses in their group's frame.
@@ -28,6 +30,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from itertools import combinations, product
 
 import numpy as np
 
@@ -101,6 +104,8 @@ def choose(
         choices.update(_within(state, pending, threshold))
         pending = {k: h for k, h in pending.items() if k not in choices}
         joined = _join_best(state, pending, threshold, ambiguity)
+        if not joined:
+            joined = _close_triangle(state, pending, threshold, ambiguity)
         if not joined:
             break
         choices.update(joined)
@@ -213,3 +218,58 @@ def _clear(
         if len(other.members) == len(best.members) and other.evidence >= ambiguity * best.evidence:
             return None
     return best
+
+
+def _close_triangle(
+    state: _Groups, pending: dict[int, list[Hypothesis]], threshold: float, ambiguity: float
+) -> dict[int, Choice]:
+    """Join three groups that links join pairwise around a triangle, where one choice of a
+    pose per link closes it and no other choice does with as much evidence; returns the
+    choices (empty: no triangle closes clearly)."""
+    by_pair: dict[tuple[int, int], list[int]] = {}
+    for k, hyps in pending.items():
+        e = hyps[0].edge
+        pair = tuple(sorted((state.group[e.target], state.group[e.source])))
+        by_pair.setdefault(pair, []).append(k)
+    nodes = sorted({g for p in by_pair for g in p})
+    for a, b, c in combinations(nodes, 3):
+        sides = [by_pair.get(p, []) for p in ((a, b), (b, c), (a, c))]
+        if not all(sides):
+            continue
+        found = _closing(state, [pending[s[0]] for s in sides], (a, b, c), threshold)
+        if found and _clearly_best(found, ambiguity):
+            best = found[0][1]
+            state.join(a, b, _proposal(state, best[0].edge, a))
+            state.join(a, c, _proposal(state, best[2].edge, a))
+            return {
+                h.link: Choice(h.link, h, "one of 3 links whose poses close a cycle") for h in best
+            }
+    return {}
+
+
+def _closing(
+    state: _Groups,
+    sides: list[list[Hypothesis]],
+    groups: tuple[int, int, int],
+    threshold: float,
+) -> list[tuple[float, tuple[Hypothesis, ...]]]:
+    """Every choice of one hypothesis per side (a-b, b-c, a-c) that closes the triangle, with
+    its summed evidence, most evidence first."""
+    a, b, c = groups
+    out = []
+    for h_ab, h_bc, h_ac in product(*sides):
+        T_ab = _proposal(state, h_ab.edge, a)
+        T_ac = _proposal(state, h_ac.edge, a)
+        moved = [
+            T_ab @ p if g == b else T_ac @ p if g == c else p
+            for p, g in zip(state.pose, state.group, strict=True)
+        ]
+        if _chi2(h_bc.edge, moved) <= threshold:
+            out.append((h_ab.evidence + h_bc.evidence + h_ac.evidence, (h_ab, h_bc, h_ac)))
+    return sorted(out, key=lambda x: -x[0])
+
+
+def _clearly_best(found: list[tuple[float, tuple[Hypothesis, ...]]], ambiguity: float) -> bool:
+    """The first closing choice has no rival: no other closes with ``ambiguity`` of its
+    evidence."""
+    return len(found) == 1 or found[1][0] < ambiguity * found[0][0]
