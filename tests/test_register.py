@@ -12,6 +12,7 @@ from ndt_cli import sim
 from ndt_cli.config import Config
 from ndt_cli.core.transforms import apply, pose2d_matrix, translation, yaw_of
 from ndt_cli.io.matrices import read_matrix
+from ndt_cli.ndt.register import Guess
 from ndt_cli.ndt.result import Status
 
 ROT_TOL_DEG = 0.3
@@ -86,16 +87,29 @@ def test_georeferenced_coordinates_register_as_accurately_as_local_ones(street):
     assert abs(err_geo - err_local) < 0.005, (err_geo, err_local)
 
 
-def test_initial_guess_skips_the_search(street):
+def test_initial_guess_skips_the_search_and_the_cells_coarser_than_its_uncertainty(street):
     scans, poses = street
     ref = relative(poses, 1, 2)
     guess = ref @ pose2d_matrix(0.8, -0.6, np.radians(2.0))
     cfg = Config()
-    result = ndt_cli.register(scans[1], scans[2], cfg, init=guess)
-    assert len(result.levels) == len(cfg.grid.cell_sizes)
-    assert all(level.starts == 25 for level in result.levels)
+    result = ndt_cli.register(scans[1], scans[2], cfg, init=guess)  # within 1 m and 5 deg
+    assert [level.cell_size for level in result.levels] == [2.0, 1.0]  # no search, no 20 m
+    assert all(level.starts == 3 * 25 for level in result.levels)  # heading, +-5 deg
     rot, trans = planar_errors(result.T_target_source, ref)
     assert rot < ROT_TOL_DEG and trans < TRANS_TOL_M
+    wide = ndt_cli.register(scans[1], scans[2], cfg, init=Guess(guess, 4.0, 1.0))
+    assert [level.cell_size for level in wide.levels] == [10.0, 5.0, 2.0, 1.0]
+    assert all(level.starts == 25 for level in wide.levels)
+    assert planar_errors(wide.T_target_source, ref)[1] < TRANS_TOL_M
+
+
+def test_a_wrong_guess_ends_right_or_not_ok(street):
+    scans, poses = street
+    ref = relative(poses, 1, 2)
+    slid = ref @ pose2d_matrix(9.0, 0.0, 0.0)  # a facade bay or two along the street
+    result = ndt_cli.register(scans[1], scans[2], Config(), init=slid)
+    rot, trans = planar_errors(result.T_target_source, ref)
+    assert (rot < ROT_TOL_DEG and trans < TRANS_TOL_M) or not result.ok, (rot, trans)
 
 
 def test_no_common_slice_means_no_overlap():
