@@ -252,8 +252,10 @@ def _network(
     edges = [_edge(links[k]) for k in firm]
     v = verify(n_scans, anchor, edges, trust_bridges=trust_bridges)
     loose = {firm[i] for i, e in enumerate(v.edges) if _unchecked(e)}
-    hyps = {k: _hypotheses(links[k], k) for k in usable_ids if links[k].result.rivals}
-    hyps.update({k: [Hypothesis(k, 0, _edge(links[k]), 1.0)] for k in loose})
+    # a degenerate link says nothing of where its scans are horizontally: it decides nothing
+    decided = [k for k in usable_ids if links[k].status is not Status.DEGENERATE]
+    hyps = {k: _hypotheses(links[k], k) for k in decided if links[k].result.rivals}
+    hyps.update({k: [Hypothesis(k, 0, _edge(links[k]), 1.0)] for k in loose if k in decided})
     groups, poses = [n.cluster for n in v.nodes], [n.pose for n in v.nodes]
     choices = choose(groups, poses, hyps, v.threshold, ambiguity)
     chosen = sorted(k for k, c in choices.items() if c.chosen is not None)
