@@ -29,6 +29,8 @@ class ChainResult:
     radius: float = float("nan")  # m, the radius links were planned within
     crs: str = ""  # the world's coordinate system as WKT, when control gave it
     grid_scale: float = 1.0  # its grid distance over ground distance, applied at the scanners
+    hashes: tuple[str | None, ...] = ()  # SHA-256 of each scan's file when it was admitted
+    # (what was registered; None: it could not be read); empty: not known
 
     @property
     def poses(self) -> tuple[np.ndarray | None, ...]:
