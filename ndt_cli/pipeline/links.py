@@ -148,7 +148,7 @@ class LinkStore:
             log.warning("%s: damaged: registered again", path)
             return None
         if digest != _digest(record):
-            log.warning("%s: changed since it was written (its digest): registered again", path)
+            _untrusted(path, digest, "registered again")
             return None
         T = link.T_target_source
         if T is not None and rigid_problem(T, tol=1e-6):  # damaged: registered again
@@ -186,7 +186,7 @@ class LinkStore:
             log.warning("%s: damaged: the scan is read again", path)
             return None
         if digest != _array_digest(arrays):
-            log.warning("%s: changed since it was written (its digest): read again", path)
+            _untrusted(path, digest, "read again")
             return None
         try:
             n = sum(name.startswith("slice_") for name in arrays)
@@ -199,6 +199,15 @@ class LinkStore:
 
     def _scan_path(self, scan_key: str) -> Path:
         return self.folder / f"scan_{scan_key[:40]}.npz"
+
+
+def _untrusted(path: Path, digest: str | None, what: str) -> None:
+    """Say why a file of the store is not used: changed since it was written (a warning), or
+    written without a digest by an older ndt-cli (a debug line: every such file is)."""
+    if digest is None:
+        log.debug("%s: no digest (an older ndt-cli wrote it): %s", path, what)
+    else:
+        log.warning("%s: changed since it was written (its digest): %s", path, what)
 
 
 def _array_digest(arrays: dict[str, np.ndarray]) -> str:
