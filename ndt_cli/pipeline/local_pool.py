@@ -53,7 +53,9 @@ def _init_worker(
 
 def _die_with(parent: int) -> None:
     """Have this worker killed when its parent process ends, however it ends (SIGKILL, the
-    OOM killer): a worker never outlives the command that started it. Linux only."""
+    OOM killer): a worker never outlives the command that started it. Linux only. The kernel
+    watches the parent's thread that started the worker: pools are driven from the main
+    thread (a pool started from a thread that ends before it would lose its workers)."""
     if sys.platform != "linux":
         return
     try:
