@@ -364,3 +364,13 @@ def test_a_scan_name_that_is_not_utf8_exports(street, tmp_path):
     res = runner.invoke(export_app, [str(out), "--out", str(tmp_path / "c.laz"), "-q"])
     assert res.exit_code == 0, res.output
     assert laspy.read(tmp_path / "c.laz").header.point_count > 0
+
+
+def test_a_link_in_place_of_the_lock_is_refused_and_its_target_kept(tmp_path):
+    out = tmp_path / "out"
+    victim = tmp_path / "victim.txt"
+    victim.write_text("kept")
+    lock_path(out).symlink_to(victim)
+    with pytest.raises(OutputError, match="a link or a folder"), output_lock(out, "a run"):
+        pass
+    assert victim.read_text() == "kept"

@@ -48,7 +48,8 @@ def _acquire(path: Path, out: Path, command: str) -> int:
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         while True:
-            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+            flags = os.O_RDWR | os.O_CREAT | os.O_CLOEXEC | os.O_NOFOLLOW  # never another file
+            fd = os.open(path, flags, 0o644)
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
@@ -65,6 +66,12 @@ def _acquire(path: Path, out: Path, command: str) -> int:
         os.ftruncate(fd, 0)
         os.write(fd, f"{os.getpid()} {command}\n".encode())
     except OSError as exc:
+        if path.is_symlink() or path.is_dir():
+            raise OutputError(
+                f"{path.name} beside it is a link or a folder, not the lock ndt-cli keeps "
+                "there: remove it",
+                out,
+            ) from None
         raise OutputError(f"cannot lock the folder ({exc.strerror or exc})", out) from None
     return fd
 
