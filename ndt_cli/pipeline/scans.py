@@ -24,10 +24,9 @@ class DuplicateScanError(InputError):
     ``original`` is that scan's file."""
 
     def __init__(self, original: str | Path, copy: str | Path) -> None:
-        super().__init__(
-            f"the same content as {original} (a copy under another name?): give every scan once",
-            copy,
-        )
+        same = Path(original).resolve() == Path(copy).resolve()
+        what = "given twice" if same else f"the same content as {original} (a copy?)"
+        super().__init__(f"{what}: give every scan once", copy)
         self.original = Path(original)
 
 
