@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 from pathlib import Path
 
 import pytest
@@ -14,6 +15,16 @@ if os.environ.get("CI") == "true":
     settings.load_profile("ci")
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+
+
+@pytest.fixture(autouse=True)
+def _signal_handlers_restored():
+    """A command run in this process sets how it takes SIGINT and SIGTERM (ignored once it
+    has stopped, SIGTERM as Ctrl-C): the test session's own handlers come back after it."""
+    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    yield
+    for sig, handler in saved.items():
+        signal.signal(sig, handler)
 
 
 def shared_data(name: str) -> Path:

@@ -48,7 +48,7 @@ def _right(T: np.ndarray | None, truth: np.ndarray) -> bool:
 
 def test_inputs_are_sorted_checked_and_the_anchor_named(tmp_path):
     for name in ("s10.xyz", "s2.xyz", "s1.xyz"):
-        (tmp_path / name).write_text("0 0 0\n")
+        (tmp_path / name).write_text(f"{name[1:-4]} 0 0\n")  # each its own content
     inputs = chain_inputs(
         [tmp_path / "s10.xyz", tmp_path / "s2.xyz", tmp_path / "s1.xyz"], anchor="s2.xyz"
     )

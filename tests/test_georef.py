@@ -28,11 +28,12 @@ EPSG = 25832  # ETRS89 / UTM zone 32N
 
 
 def _scans(tmp_path: Path, n: int = 2) -> list[str]:
-    """Stand-in scan files: the checks below come before any scan is read."""
+    """Stand-in scan files (each its own content: a copy is refused): the checks below come
+    before any scan is prepared."""
     files = []
     for k in range(n):
         files.append(str(tmp_path / f"scan_{k}.xyz"))
-        Path(files[-1]).write_text("0 0 0\n1 0 0\n0 1 0\n")
+        Path(files[-1]).write_text(f"{k} 0 0\n1 0 0\n0 1 0\n")
     return files
 
 

@@ -30,6 +30,7 @@ from ndt_cli.cli.common import (
     load_config,
     new_app,
     setup_logging,
+    stop_on_sigterm,
     user_errors,
 )
 from ndt_cli.errors import EXIT_REGISTRATION
@@ -78,6 +79,14 @@ def chain(
             "--resume", help="Reuse finished links whose inputs and config are unchanged."
         ),
     ] = False,
+    overwrite: Annotated[
+        bool,
+        typer.Option(
+            "--overwrite",
+            help="Replace a result in --out that shares no scan with this campaign (another "
+            "campaign's); without it that is refused.",
+        ),
+    ] = False,
     anchor: Annotated[
         str, typer.Option(help="The scan that defines the world: its index or its name.")
     ] = "0",
@@ -113,9 +122,11 @@ def chain(
     version: VersionOpt = None,
 ) -> None:
     setup_logging(quiet or json_out, verbose)
+    stop_on_sigterm()
     opts = _Options(out, jobs, resume, executor, scheduler, not (quiet or json_out))
     with user_errors("ndt-chain", debug, _RESUME_HINT):
-        from ndt_cli.pipeline.inputs import chain_inputs
+        from ndt_cli.io.outlock import output_lock
+        from ndt_cli.pipeline.inputs import chain_inputs, refuse_another_campaign
 
         cfg = load_config(config, print_config)
         _check(opts)
@@ -130,7 +141,10 @@ def chain(
             crs=crs,
         )
         check_out(out, *inputs.paths, pairs, config, control)
-        result, runtime = _run(inputs, cfg, opts)
+        with output_lock(out, "ndt-chain"):
+            if not overwrite:
+                refuse_another_campaign(out, inputs.paths)
+            result, runtime = _run(inputs, cfg, opts)
     _show(result, runtime, out, json_out, quiet)
     if not result.ok:
         raise typer.Exit(EXIT_REGISTRATION)
@@ -170,19 +184,22 @@ def _run(inputs: ChainInputs, cfg: Config, opts: _Options) -> tuple[ChainResult,
 
     t0 = time.perf_counter()
     pool = make_executor(opts.executor, opts.jobs, opts.scheduler)
-    pool.start()  # before this process starts threads of its own
-    total = expected_links(len(inputs.paths), inputs.network)
-    with ChainProgress(inputs.names, total, enabled=opts.progress) as advance:
-        result = run_chain(
-            inputs.paths,
-            cfg,
-            opts.out,
-            executor=pool,
-            resume=opts.resume,
-            anchor=inputs.anchor,
-            network=inputs.network,
-            on_progress=advance,
-        )
+    try:  # closed whatever stops the run (run_chain closes it too)
+        pool.start()  # before this process starts threads of its own
+        total = expected_links(len(inputs.paths), inputs.network)
+        with ChainProgress(inputs.names, total, enabled=opts.progress) as advance:
+            result = run_chain(
+                inputs.paths,
+                cfg,
+                opts.out,
+                executor=pool,
+                resume=opts.resume,
+                anchor=inputs.anchor,
+                network=inputs.network,
+                on_progress=advance,
+            )
+    finally:
+        pool.close()
     runtime = time.perf_counter() - t0
     result = with_named_reasons(result)
     write_chain_outputs(opts.out, result, cfg, runtime, command_line())

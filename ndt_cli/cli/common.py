@@ -12,6 +12,7 @@ import atexit
 import contextlib
 import gc
 import logging
+import os
 import signal
 import sys
 import warnings
@@ -23,7 +24,7 @@ import typer
 from typer.core import TyperCommand, TyperGroup
 
 from ndt_cli.core.logs import PROGRESS
-from ndt_cli.errors import NdtError, UserInterruptError, caused_by_interrupt
+from ndt_cli.errors import EXIT_INTERRUPTED, NdtError, UserInterruptError, caused_by_interrupt
 
 try:  # typer >= 0.2x vendors click
     from typer._click.exceptions import ClickException
@@ -160,12 +161,25 @@ def _one_line_main(main: Any, self: Any, args: Any, prog_name: Any, kw: dict) ->
         prog = ctx.find_root().info_name if ctx is not None else (prog_name or "ndt-cli")
         typer.echo(f"{prog}: error: {' '.join(exc.format_message().split())}", err=True)
         sys.exit(exc.exit_code)
-    except typer.Abort:
+    except (typer.Abort, KeyboardInterrupt):  # a Ctrl-C outside the command's guard
         typer.echo("interrupted", err=True)
-        sys.exit(130)
+        value = EXIT_INTERRUPTED
+    if value == EXIT_INTERRUPTED:
+        _end_if_workers_abandoned()
     if standalone:
         sys.exit(value if isinstance(value, int) else 0)
     return value
+
+
+def _end_if_workers_abandoned() -> None:
+    """End the process now (exit 130) when a second Ctrl-C made the command kill its worker
+    processes rather than wait for them: the interpreter's exit hooks would wait for the
+    pool's manager thread, which may never end (see ``WorkerPool.close``)."""
+    pool = sys.modules.get("ndt_cli.pipeline.local_pool")
+    if pool is not None and pool.abandoned():
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(EXIT_INTERRUPTED)
 
 
 class OneLineCommand(TyperCommand):
@@ -259,6 +273,17 @@ def let_ctrl_c_in() -> None:
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
+def stop_on_sigterm() -> None:
+    """SIGTERM (``kill``, ``timeout``, a service manager) stops the command as Ctrl-C does:
+    what finished is kept, one line, exit 130 (worker processes ignore it and finish their
+    tasks first)."""
+    signal.signal(signal.SIGTERM, _interrupt)
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
 @contextlib.contextmanager
 def user_errors(prog: str, debug: bool, interrupted: str = "interrupted") -> Iterator[None]:
     """Turn user errors and Ctrl-C into one line on stderr and the documented exit code; print
@@ -273,6 +298,7 @@ def user_errors(prog: str, debug: bool, interrupted: str = "interrupted") -> Ite
     except BaseException as exc:
         if not caused_by_interrupt(exc):
             raise
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # stopped: a second Ctrl-C adds nothing
         raise fail(UserInterruptError(interrupted), prog) from None
     flush_messages()
 

@@ -90,7 +90,10 @@ def watch(
         cfg = load_config(config, print_config)
         net = _network(neighbours, radius, control, crs)
         opts = _check(folder, out, jobs, net, exit_when_idle, interval, settle, control)
-        ok = _run(cfg, opts)
+        from ndt_cli.io.outlock import output_lock
+
+        with output_lock(out, "ndt-watch"):
+            ok = _run(cfg, opts)
     if not ok:
         raise typer.Exit(EXIT_REGISTRATION)
 
@@ -173,7 +176,7 @@ def _run(cfg: Config, opts: _Options) -> bool:
         while opts.idle is None or time.monotonic() - last < opts.idle:
             landed = folder.poll()
             for scan in landed:
-                result = _add(campaign, scan, cfg, opts.out)
+                result = _add(campaign, scan, cfg, opts.out) or result
             if landed or folder.pending:  # idle counts from the end of the last update
                 last = time.monotonic()
             time.sleep(opts.interval)
@@ -188,16 +191,22 @@ def _interrupt(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 
 
-def _add(campaign: Campaign, scan: Landed, cfg: Config, out: Path) -> ChainResult:
+def _add(campaign: Campaign, scan: Landed, cfg: Config, out: Path) -> ChainResult | None:
     """Register a landed scan, publish the outputs, print its line."""
     import time
 
+    from ndt_cli.pipeline.scans import DuplicateScanError
     from ndt_cli.report.chain_outputs import write_chain_outputs
     from ndt_cli.report.reasons import with_named_reasons
     from ndt_cli.report.world import first_scan_role
 
     t0 = time.perf_counter()
-    campaign.add_scans([scan.path])
+    try:
+        campaign.add_scans([scan.path])
+    except DuplicateScanError as exc:  # registered once: the copy is left alone
+        same = f"{scan.path.name}: the same content as {exc.original.name}: left alone"
+        typer.echo(same, err=True)
+        return None
     result = with_named_reasons(campaign.result())
     write_chain_outputs(out, result, cfg, time.perf_counter() - t0, command_line())
     report = campaign.report(len(result.scans) - 1, result)

@@ -95,6 +95,9 @@ class PlyReader(PointReader):
     def summary(self, path: Path) -> Summary:
         return record_io.ply_summary(path)
 
+    def check(self, path: Path) -> None:
+        record_io.ply_summary(path)  # the header: magic line, vertex element, x, y, z
+
     def records(self, path: Path, chunk_points: int) -> Iterator[Chunk]:
         return record_io.ply_chunks(path, chunk_points)
 
@@ -131,6 +134,8 @@ class LasReader(PointReader):
 
     def count(self, path: Path) -> int:
         with laspy.open(path) as reader:
+            _check_las_coordinates(reader.header, path)
+            _check_las_size(reader.header, path)
             _warn_extra_records(reader.header, path)
             return int(reader.header.point_count)
 
@@ -149,6 +154,7 @@ class LasReader(PointReader):
         size = chunk_size or LAS_CHUNK_SIZE
         with laspy.open(path, laz_backend=LAZ_BACKEND, decompression_selection=XYZ) as reader:
             header = reader.header
+            _check_las_coordinates(header, path)
             scale = np.array(header.scales, np.float64)
             offset = np.array(header.offsets, np.float64)
             if not header.are_points_compressed:
@@ -164,6 +170,7 @@ class LasReader(PointReader):
     def read_xyz(self, path: Path) -> np.ndarray:
         with laspy.open(path, laz_backend=LAZ_BACKEND, decompression_selection=XYZ) as reader:
             header = reader.header
+            _check_las_coordinates(header, path)
             if header.are_points_compressed:  # a LAZ file's size does not vouch for its count
                 chunks = _las_chunks(reader, path, LAS_CHUNK_SIZE)
                 parts = [_scaled_xyz(c, np.empty((len(c), 3))) for c in chunks]
@@ -233,9 +240,34 @@ def _las_chunks(reader: laspy.LasReader, path: Path, chunk_size: int) -> Iterato
         raise InputError(f"truncated file: header announces {n} points, found {filled}", path)
 
 
+FARTHEST = 1e15  # m: no coordinate of a real scan lies farther (float64 keeps 0.1 m there)
+
+
+def _check_las_coordinates(header: laspy.LasHeader, path: Path) -> None:
+    """The header's scales and offsets must give real coordinates: finite, positive scales,
+    finite offsets, and no stored integer mapped beyond :data:`FARTHEST` metres."""
+    scales = np.asarray(header.scales, np.float64)
+    offsets = np.asarray(header.offsets, np.float64)
+    if not (np.isfinite(scales).all() and (scales > 0).all() and np.isfinite(offsets).all()):
+        raise InputError(
+            f"the header's scales {scales.tolist()} or offsets {offsets.tolist()} are not "
+            "usable (a damaged header?)",
+            path,
+        )
+    reach = float(np.max(np.abs(offsets) + scales * 2.0**31))
+    if reach > FARTHEST:
+        raise InputError(
+            f"the header's scales {scales.tolist()} and offsets {offsets.tolist()} put "
+            f"coordinates up to {reach:.3g} m, beyond any real scan (a damaged header?)",
+            path,
+        )
+
+
 def _check_las_size(header: laspy.LasHeader, path: Path) -> None:
-    """An uncompressed LAS file must hold the bytes of every point its header announces."""
+    """An uncompressed LAS file must hold the bytes of every point its header announces; a
+    LAZ file, its chunk table (which a LAZ writer puts after the points)."""
     if header.are_points_compressed:
+        _check_laz_size(header, path)
         return
     n = int(header.point_count)
     record = header.point_format.size
@@ -245,6 +277,27 @@ def _check_las_size(header: laspy.LasHeader, path: Path) -> None:
         raise InputError(
             f"truncated LAS file: header announces {n} points ({needed} bytes), "
             f"file has {size} bytes",
+            path,
+        )
+
+
+def _check_laz_size(header: laspy.LasHeader, path: Path) -> None:
+    """A LAZ file cut short (an aborted copy) ends before the chunk table whose offset the
+    first 8 bytes of its point data give (-1: written without one; not checked). Only
+    chunked LAZ (every LAZ writer of today: compressor 2 or 3 in its LASzip record) has one."""
+    zip_vlr = next((v for v in header.vlrs if getattr(v, "record_id", None) == 22204), None)
+    data = getattr(zip_vlr, "record_data", None) or b""
+    if int.from_bytes(bytes(data[:2]), "little") not in (2, 3):
+        return
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        fh.seek(header.offset_to_point_data)
+        raw = fh.read(8)
+    table = int.from_bytes(raw, "little", signed=True) if len(raw) == 8 else 0
+    if len(raw) < 8 or table + 8 > size:
+        raise InputError(
+            f"truncated LAZ file: it ends at byte {size}, before its chunk table"
+            + (f" (at byte {table})" if len(raw) == 8 else ""),
             path,
         )
 
@@ -274,6 +327,9 @@ class PcdReader(PointReader):
 
     def summary(self, path: Path) -> Summary:
         return record_io.pcd_summary(path)
+
+    def check(self, path: Path) -> None:
+        record_io.pcd_summary(path)  # the header: FIELDS (x, y, z among them) ... DATA
 
     def records(self, path: Path, chunk_points: int) -> Iterator[Chunk]:
         return record_io.pcd_chunks(path, chunk_points)

@@ -109,7 +109,7 @@ def checked_reader(path: str | Path) -> tuple[Path, PointReader]:
     f = split_spec(p)[0]  # 'scans.e57#3' names scan 3 of scans.e57
     try:
         if not f.exists():
-            raise InputError("file not found", p)
+            raise InputError(_not_found(f), p)
         if f.is_dir():
             raise InputError("is a directory, not a point file", p)
         if not f.is_file():
@@ -124,12 +124,50 @@ def checked_reader(path: str | Path) -> tuple[Path, PointReader]:
     return p, reader
 
 
+def _not_found(f: Path) -> str:
+    """Why ``f`` is not found: a file that is there with a ``#...`` tail that names no scan
+    (``FILE.e57#K`` needs a number K; a file of one scan takes none), or no file at all."""
+    from ndt_cli.io.multiscan import MULTI_SCAN
+
+    text = str(f)
+    cuts = [k for k, c in enumerate(text) if c == "#"]
+    base = next((Path(text[:k]) for k in reversed(cuts) if Path(text[:k]).is_file()), None)
+    if base is None:
+        return "file not found"
+    tail = text[len(str(base)) :]
+    if base.suffix.lower() in MULTI_SCAN:
+        return f"{tail!r} names no scan: {base.name}#K takes a scan number K = 0, 1, ..."
+    kind = f"a {base.suffix} file" if base.suffix else "this file"
+    return f"{kind} holds one scan: name it without {tail!r}"
+
+
 def check_readable(path: str | Path) -> None:
     """Raise the file's one-line :class:`InputError` now if it cannot be opened as a point
     file (missing, unreadable, unknown format, empty, a broken header), before any heavy work."""
     p, reader = checked_reader(path)
     with file_errors(p):
         reader.check(p)
+
+
+TYPICAL_SPREAD = 250.0  # m: half a terrestrial scan's points lie nearer to its centre
+
+
+def check_spread(sample: np.ndarray, path: Path | None) -> None:
+    """Raise :class:`InputError` when half of a sample of a scan's points (m,3, metres) lie
+    farther than :data:`TYPICAL_SPREAD` from their median point: a scanner's points crowd
+    around it (tens of metres in a street, a few in a room), so the coordinates are in other
+    units or a first column is no coordinate. Registering such a scan would take minutes and
+    gigabytes before failing with a misleading message."""
+    if len(sample) < 100:
+        return
+    spread = float(np.median(np.linalg.norm(sample - np.median(sample, axis=0), axis=1)))
+    if spread > TYPICAL_SPREAD:
+        raise InputError(
+            f"half its points lie more than {spread:.0f} m from their centre (a scan's lie "
+            "within tens of metres): coordinates in centimetres or millimetres (set "
+            "input.scale), or a first column that is not x (an id)?",
+            path,
+        )
 
 
 @contextmanager

@@ -63,6 +63,24 @@ def _first_data_row(lines: list[str]) -> int | None:
     return None
 
 
+def _head(path: Path) -> tuple[list[str], int | None]:
+    """The file's first :data:`_HEAD_LINES` lines and the index of its first row of points
+    (None: none among them); decimal commas and text that is not UTF-8 are errors."""
+    try:
+        with path.open(encoding="utf-8-sig") as fh:
+            head = [line for _, line in zip(range(_HEAD_LINES), fh, strict=False)]
+    except UnicodeDecodeError as exc:
+        raise InputError(f"not a UTF-8 text file ({exc.reason} at byte {exc.start})", path) from exc
+    for number, line in enumerate(head, 1):
+        if _has_decimal_commas(_strip_comment(line)):
+            raise InputError(
+                f"line {number}: decimal commas ({line.strip()[:30]!r}) are not supported; "
+                "write the numbers with decimal points",
+                path,
+            )
+    return head, _first_data_row(head)
+
+
 class TextReader(PointReader):
     """xyz/txt/csv: first three numeric columns, separated by whitespace, comma or semicolon.
 
@@ -86,22 +104,16 @@ class TextReader(PointReader):
             part = xyz[start : start + chunk_points]
             yield {a: np.ascontiguousarray(part[:, k]) for k, a in enumerate("xyz")}
 
-    def read_xyz(self, path: Path) -> np.ndarray:
-        try:
-            with path.open(encoding="utf-8-sig") as fh:
-                head = [line for _, line in zip(range(_HEAD_LINES), fh, strict=False)]
-        except UnicodeDecodeError as exc:
+    def check(self, path: Path) -> None:
+        """The first lines: UTF-8, decimal points, and a row of three numbers among them."""
+        if _head(path)[1] is None:
             raise InputError(
-                f"not a UTF-8 text file ({exc.reason} at byte {exc.start})", path
-            ) from exc
-        for number, line in enumerate(head, 1):
-            if _has_decimal_commas(_strip_comment(line)):
-                raise InputError(
-                    f"line {number}: decimal commas ({line.strip()[:30]!r}) are not supported; "
-                    "write the numbers with decimal points",
-                    path,
-                )
-        n_header = _first_data_row(head)
+                f"no row of x y z numbers in its first {_HEAD_LINES} lines: not a point file?",
+                path,
+            )
+
+    def read_xyz(self, path: Path) -> np.ndarray:
+        head, n_header = _head(path)
         if n_header is None:
             return np.empty((0, 3))
         first = _strip_comment(head[n_header])

@@ -25,6 +25,7 @@ from ndt_cli.core.geometry import SURFACES, Surfaces, VoxelThinner
 from ndt_cli.core.transforms import levelling_rotation, rotation4, translation
 from ndt_cli.errors import InputError
 from ndt_cli.io.blocks import Block
+from ndt_cli.io.points import check_spread
 from ndt_cli.ndt.backend import NUMBA, Kernels
 from ndt_cli.ndt.ceiling import CeilingView, ceiling_view
 from ndt_cli.ndt.chunks import HELD_SUFFIXES, ScanChunks, no_points_in_range
@@ -213,6 +214,7 @@ def prepare_chunks(
     m, 0: no ICP points). Fewer than ``min_points`` slice points is an error.
     """
     first = _first_pass(scan, inp or InputConfig())
+    check_spread(first.sample, scan.path)
     frame = scan_frame(first.sample, ground, kernels.surfaces)
     cut, thin = _second_pass(scan, frame, slices, icp_voxel, kernels)
     if sum(len(s) for s in cut) < min_points:

@@ -63,12 +63,13 @@ from ndt_cli.pipeline.network import (
     plan_near,
 )
 from ndt_cli.pipeline.result import ChainResult, ScanReport, scan_report
-from ndt_cli.pipeline.scans import file_hash, scan_names
+from ndt_cli.pipeline.scans import DuplicateScanError, file_hash, scan_names
 from ndt_cli.pipeline.solution import NetworkSolution, solve
 
 log = logging.getLogger(__name__)
 progress = logging.getLogger("ndt_cli.progress")
 
+UNREADABLE = "unreadable "  # the identity of a file that cannot be hashed starts so
 ROUNDS = 3  # consolidation rounds: place, plan, register
 BRIDGES = 2  # registrations tried between a group and the others, best coarse matches first
 PROBES = 2  # placed scans nearest to a prediction that a scan is registered to, to test it
@@ -167,11 +168,12 @@ class Campaign:
         """Solve the planned network: a pose and a status per scan."""
         links = self._network()
         names = tuple(scan_names(self.paths))
+        anchor = self._anchor(names)
         if self.net.adjust and links:
             progress.info("adjusting the network of %d link(s)", len(links))
         solution = solve(
             len(self.paths),
-            self.anchor,
+            anchor,
             links,
             self.net.adjust,
             self.unreadable,
@@ -186,13 +188,30 @@ class Campaign:
             names=names,
             links=tuple(links),
             solution=solution,
-            anchor=self.anchor,
+            anchor=anchor,
             unreadable=dict(sorted(self.unreadable.items())),
             previews={i: s.preview for i, s in sorted(self.summaries.items())},
             reused=tuple(k for k, link in enumerate(links) if link.key in self.reused),
             radius=self.radius,
+            hashes=tuple(None if h.startswith(UNREADABLE) else h for h in self.hashes),
             **self._world_system(solution),
         )
+
+    def _anchor(self, names: Sequence[str]) -> int:
+        """The scan whose frame is the world: the anchor asked for, or, when that one could
+        not be read, the first scan that could (an aborted copy never defines the world)."""
+        if self.anchor not in self.unreadable:
+            return self.anchor
+        readable = [i for i in range(len(self.paths)) if i not in self.unreadable]
+        if not readable:
+            return self.anchor
+        log.warning(
+            "the anchor %s could not be read (%s): the world is the frame of %s",
+            names[self.anchor],
+            self.unreadable[self.anchor],
+            names[readable[0]],
+        )
+        return readable[0]
 
     def _world_system(self, solution: NetworkSolution) -> dict[str, Any]:
         """The control's stations and coordinate system, and the grid scale when applied."""
@@ -210,10 +229,19 @@ class Campaign:
     # ------------------------------------------------------------------ the steps
 
     def _admit(self, paths: Sequence[str | Path]) -> list[int]:
+        """Give each new scan the next index, known by its content; a scan whose content
+        the campaign has already (a copy under another name) raises
+        :class:`~ndt_cli.pipeline.scans.DuplicateScanError` and none is admitted."""
+        files = [Path(p) for p in paths]
+        ids = [_identity(p) for p in files]
+        known = dict(zip(self.hashes, self.paths, strict=True))
+        for p, h in zip(files, ids, strict=True):
+            if h in known:
+                raise DuplicateScanError(known[h], p)
+            known[h] = p
         first = len(self.paths)
-        for p in paths:
-            self.paths.append(Path(p))
-            self.hashes.append(_identity(Path(p)))
+        self.paths.extend(files)
+        self.hashes.extend(ids)
         return list(range(first, len(self.paths)))
 
     def _discover(self, new: list[int]) -> None:
@@ -442,7 +470,7 @@ class Campaign:
 def _identity(path: Path) -> str:
     """What a scan is known by in link keys: the SHA-256 of its file; a file that cannot be
     read (whose links fail and are never kept) by its path."""
-    return file_hash(path) or f"unreadable {path}"
+    return file_hash(path) or f"{UNREADABLE}{path}"
 
 
 def _log_controls(solution: NetworkSolution) -> None:

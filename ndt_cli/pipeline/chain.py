@@ -8,7 +8,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from ndt_cli.config.schema import Config
-from ndt_cli.errors import NdtError
+from ndt_cli.errors import InputError, NdtError
 from ndt_cli.ndt.prepare import look, settle_scene
 from ndt_cli.pipeline.campaign import Campaign, NetworkOptions
 from ndt_cli.pipeline.executors import Executor
@@ -16,6 +16,7 @@ from ndt_cli.pipeline.links import Link
 from ndt_cli.pipeline.local_pool import WorkerPool
 from ndt_cli.pipeline.network import classic_chain
 from ndt_cli.pipeline.result import ChainResult
+from ndt_cli.pipeline.scans import file_hash
 from ndt_cli.pipeline.workers import default_jobs
 
 __all__ = ["ChainResult", "NetworkOptions", "plan_links", "run_chain", "scene_of"]
@@ -71,6 +72,21 @@ def run_chain(
     )
     try:
         campaign.add_scans(list(scans))
-        return campaign.result()
+        result = campaign.result()
     finally:
         campaign.close()
+    refuse_changed(result)
+    return result
+
+
+def refuse_changed(result: ChainResult) -> None:
+    """Raise :class:`InputError` when a scan's file is not the one registered: its content
+    changed since the campaign took it (a file still being copied or synced when the run
+    started). Its poses would be exported onto other points."""
+    for path, registered in zip(result.scans, result.hashes, strict=False):
+        if registered is not None and file_hash(path, reuse=False) != registered:
+            raise InputError(
+                "changed while the campaign was registered (still being copied?): run again "
+                "once it is complete (--resume keeps the finished links)",
+                path,
+            )

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,8 +27,17 @@ from ndt_cli.ndt.overlap import Sketch
 from ndt_cli.ndt.result import RegistrationResult, Status
 from ndt_cli.pipeline.network import LinkKind
 
+log = logging.getLogger(__name__)
+
 LINK_FOLDER = "links"
+DIGEST = "digest"  # a link file's SHA-256 of the rest of its content: edits are found
 _FORMAT = 4  # version of the link files: older ones are recomputed, not misread
+
+
+def _digest(record: dict[str, Any]) -> str:
+    """SHA-256 of a record's content (keys sorted, compact JSON)."""
+    text = json.dumps(record, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def link_key(target_hash: str, source_hash: str, cfg_text: str) -> str:
@@ -116,16 +126,29 @@ class LinkStore:
             stale.unlink(missing_ok=True)
 
     def save(self, link: Link, names: tuple[str, str] = ("", "")) -> None:
-        """Keep a finished link (``names``: its target's and source's, for a reader)."""
+        """Keep a finished link (``names``: its target's and source's, for a reader), with
+        the digest of its content."""
         record = {**link.to_dict(), "target_name": names[0], "source_name": names[1]}
+        record = json.loads(to_json(record))  # as it reads back
+        record[DIGEST] = _digest(record)
         atomic.write_text(self.path(link.key), to_json(record))
 
     def load(self, key: str) -> Link | None:
-        """The finished link whose inputs had this ``key``, else None (also when its file is
-        damaged: unreadable, or a transform that is not rigid; it is registered again)."""
+        """The finished link whose inputs had this ``key``, else None: also when its file is
+        damaged or was changed (its digest does not match its content, a transform that is
+        not rigid, a file of an older ndt-cli without a digest); it is registered again."""
+        path = self.path(key)
         try:
-            link = Link.from_dict(json.loads(self.path(key).read_text(encoding="utf-8")))
+            record = json.loads(path.read_text(encoding="utf-8"))
+            digest = record.pop(DIGEST, None)
+            link = Link.from_dict(record)
+        except FileNotFoundError:
+            return None
         except (OSError, ValueError, TypeError, KeyError, AttributeError):
+            log.warning("%s: damaged: registered again", path)
+            return None
+        if digest != _digest(record):
+            _untrusted(path, digest, "registered again")
             return None
         T = link.T_target_source
         if T is not None and rigid_problem(T, tol=1e-6):  # damaged: registered again
@@ -133,28 +156,65 @@ class LinkStore:
         return link if link.key == key else None
 
     def save_scan(self, scan_key: str, preview: np.ndarray, sketch: Sketch) -> None:
-        """Keep what the campaign needs of a scan without reading it again."""
-        arrays = {f"slice_{k}": s for k, s in enumerate(sketch.slices)}
+        """Keep what the campaign needs of a scan without reading it again, with the digest
+        of its arrays."""
         field = sketch.field
-        with atomic.atomic_open(self.folder / f"scan_{scan_key[:40]}.npz", "wb") as fh:
-            np.savez(
-                fh,
-                preview=preview,
-                field=field.values,
-                origin=field.origin,
-                resolution=np.float64(field.resolution),
-                centre=field.centre,
-                to_local=sketch.to_local,
-                **arrays,
-            )
+        arrays = {
+            "preview": preview,
+            "field": field.values,
+            "origin": field.origin,
+            "resolution": np.float64(field.resolution),
+            "centre": field.centre,
+            "to_local": sketch.to_local,
+            **{f"slice_{k}": s for k, s in enumerate(sketch.slices)},
+        }
+        arrays = {name: np.asarray(a) for name, a in arrays.items()}
+        with atomic.atomic_open(self._scan_path(scan_key), "wb") as fh:
+            np.savez(fh, **arrays, **{DIGEST: np.array(_array_digest(arrays))})
 
     def load_scan(self, scan_key: str) -> tuple[np.ndarray, Sketch] | None:
-        """A scan's preview and sketch, if kept."""
+        """A scan's preview and sketch, if kept (and unchanged since: else None, and the scan
+        is read again)."""
+        path = self._scan_path(scan_key)
         try:
-            with np.load(self.folder / f"scan_{scan_key[:40]}.npz") as z:
-                n = sum(name.startswith("slice_") for name in z.files)
-                slices = tuple(z[f"slice_{k}"] for k in range(n))
-                field = ScoreField(z["field"], z["origin"], float(z["resolution"]), z["centre"])
-                return z["preview"], Sketch(slices, field, z["to_local"])
-        except (OSError, ValueError, KeyError):
+            with np.load(path) as z:
+                arrays = {name: z[name] for name in z.files if name != DIGEST}
+                digest = str(z[DIGEST]) if DIGEST in z.files else None
+        except FileNotFoundError:
             return None
+        except (OSError, ValueError, KeyError):
+            log.warning("%s: damaged: the scan is read again", path)
+            return None
+        if digest != _array_digest(arrays):
+            _untrusted(path, digest, "read again")
+            return None
+        try:
+            n = sum(name.startswith("slice_") for name in arrays)
+            slices = tuple(arrays[f"slice_{k}"] for k in range(n))
+            f = arrays
+            field = ScoreField(f["field"], f["origin"], float(f["resolution"]), f["centre"])
+            return f["preview"], Sketch(slices, field, f["to_local"])
+        except (KeyError, TypeError, ValueError):
+            return None
+
+    def _scan_path(self, scan_key: str) -> Path:
+        return self.folder / f"scan_{scan_key[:40]}.npz"
+
+
+def _untrusted(path: Path, digest: str | None, what: str) -> None:
+    """Say why a file of the store is not used: changed since it was written (a warning), or
+    written without a digest by an older ndt-cli (a debug line: every such file is)."""
+    if digest is None:
+        log.debug("%s: no digest (an older ndt-cli wrote it): %s", path, what)
+    else:
+        log.warning("%s: changed since it was written (its digest): %s", path, what)
+
+
+def _array_digest(arrays: dict[str, np.ndarray]) -> str:
+    """SHA-256 of named arrays: each one's name, type, shape and bytes, by name."""
+    h = hashlib.sha256()
+    for name in sorted(arrays):
+        a = np.ascontiguousarray(arrays[name])
+        h.update(f"{name}|{a.dtype.str}|{a.shape}|".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import multiprocessing
 import os
@@ -28,13 +29,19 @@ log = logging.getLogger(__name__)
 
 
 _busy: Counter | None = None  # in a worker: the pool's count of workers running a task
+_PR_SET_PDEATHSIG = 1  # prctl option: the signal this process gets when its parent dies
+_abandoned = threading.Event()  # set once workers were killed instead of being waited for
 
 
 def _init_worker(
-    threads: int | None, busy: Counter | None, init: Callable[[], None] | None
+    parent: int, threads: int | None, busy: Counter | None, init: Callable[[], None] | None
 ) -> None:
     global _busy
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is handled by the parent
+    # Ctrl-C and SIGTERM (to the process group) are handled by the parent, which lets the
+    # workers finish their tasks; the parent's own handlers are not the workers'
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    _die_with(parent)
     if busy is None:
         set_threads(threads or 1)
     else:
@@ -42,6 +49,21 @@ def _init_worker(
         share_threads(busy)
     if init is not None:
         init()
+
+
+def _die_with(parent: int) -> None:
+    """Have this worker killed when its parent process ends, however it ends (SIGKILL, the
+    OOM killer): a worker never outlives the command that started it. Linux only. The kernel
+    watches the parent's thread that started the worker: pools are driven from the main
+    thread (a pool started from a thread that ends before it would lose its workers)."""
+    if sys.platform != "linux":
+        return
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != parent:  # the parent died before the request took effect
+        os._exit(1)
 
 
 def _counted(task: Task) -> Any:
@@ -114,7 +136,7 @@ class WorkerPool:
             max_workers=workers,
             mp_context=context,
             initializer=_init_worker,
-            initargs=(self.threads, busy, self._init),
+            initargs=(os.getpid(), self.threads, busy, self._init),
         )
         return self._pool
 
@@ -150,14 +172,41 @@ class WorkerPool:
         """Cancel the tasks that have not started and wait for the workers to finish those
         they hold and exit, with the pool's manager thread (after a run: about 15 ms).
 
-        Workers are not killed (on Ctrl-C too; they ignore SIGINT): a worker killed while it
-        sends a result leaves the manager thread waiting for the rest of the message forever,
-        and so the interpreter's exit. Not waiting leaves the manager thread closing its
-        wake-up pipe while the exit hook writes to it (a traceback after the last line).
+        Workers are not killed on a first Ctrl-C (they ignore SIGINT): a worker killed while
+        it sends a result leaves the manager thread waiting for the rest of the message
+        forever, and so the interpreter's exit. Not waiting leaves the manager thread closing
+        its wake-up pipe while the exit hook writes to it (a traceback after the last line).
+        A second Ctrl-C while they finish (or a pool that a Ctrl-C broke as it started,
+        whose workers would wait for work forever) kills them instead, and marks the pool
+        abandoned: the command then ends at once (:func:`abandoned`), never waiting for a
+        thread or a process.
         """
-        if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
-            self._pool = None
+        pool, self._pool = self._pool, None
+        if pool is None:
+            return
+        workers = list((getattr(pool, "_processes", None) or {}).values())  # shutdown drops it
+        try:
+            pool.shutdown(wait=True, cancel_futures=True)
+        finally:
+            _kill_alive(workers)  # none is left once the pool shut down whole
+
+
+def abandoned() -> bool:
+    """Whether worker processes were killed rather than waited for (see
+    :meth:`WorkerPool.close`): the process should end without its exit hooks, which would
+    wait for the pool's manager thread."""
+    return _abandoned.is_set()
+
+
+def _kill_alive(workers: list[multiprocessing.process.BaseProcess]) -> None:
+    """Kill the worker processes that are still alive (and reap them)."""
+    alive = [p for p in workers if p.is_alive()]
+    for p in alive:
+        p.kill()
+    for p in alive:
+        p.join(timeout=5)
+    if alive:
+        _abandoned.set()
 
 
 def _collect(

@@ -32,6 +32,8 @@ class ChainResult:
     crs: str = ""  # the control's coordinate system as WKT, when given (--crs)
     grid_scale: float = 1.0  # its grid distance over ground distance, applied at the scanners
     stations: tuple[Station, ...] = ()  # the control file's stations (none without control)
+    hashes: tuple[str | None, ...] = ()  # SHA-256 of each scan's file when it was admitted
+    # (what was registered; None: it could not be read); empty: not known
 
     @property
     def poses(self) -> tuple[np.ndarray | None, ...]:

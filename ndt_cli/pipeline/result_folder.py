@@ -127,8 +127,11 @@ def _pose(row: dict[str, str], where: str, path: Path) -> np.ndarray:
 
 
 def _is_tail(name: str, file: str) -> bool:
-    """Whether the scan name is the end of its file's path (``north/scan.laz``)."""
-    return file == name or file.replace("\\", "/").endswith("/" + name)
+    """Whether the scan name is the end of its file's path (``north/scan.laz``). The name is
+    as a CSV file holds it: a file name that is not valid UTF-8 is written escaped there."""
+    file = file.encode("utf-8", "backslashreplace").decode("utf-8")
+    tails = (file, file.replace("\\", "/"))  # a Windows path's folders too
+    return file == name or any(t.endswith("/" + name) for t in tails)
 
 
 def _chain_row(row: dict[str, str], k: int, file: str, path: Path) -> ResultScan:

@@ -14,7 +14,20 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from ndt_cli.errors import InputError
+
 _HASH_CHUNK = 1 << 20
+
+
+class DuplicateScanError(InputError):
+    """A scan whose content an earlier scan of the campaign has (a copy under another name):
+    ``original`` is that scan's file."""
+
+    def __init__(self, original: str | Path, copy: str | Path) -> None:
+        same = Path(original).resolve() == Path(copy).resolve()
+        what = "given twice" if same else f"the same content as {original} (a copy?)"
+        super().__init__(f"{what}: give every scan once", copy)
+        self.original = Path(original)
 
 
 def natural_key(path: str | Path) -> list[Any]:
@@ -29,11 +42,27 @@ def natural_sort(paths: Sequence[str | Path]) -> list[Path]:
     ]
 
 
-def file_hash(path: Path) -> str | None:
-    """SHA-256 of a scan's file bytes (and its scan number in an E57); None if unreadable."""
+_known: dict[tuple[Path, int | None], tuple[tuple[int, ...], str]] = {}  # hashes, by file
+
+
+def file_hash(path: Path, *, reuse: bool = True) -> str | None:
+    """SHA-256 of a scan's file bytes (and its scan number in an E57); None if unreadable.
+
+    With ``reuse``, a file hashed before whose size, times and inode have not changed since
+    is not read again (a campaign's inputs are hashed when they are checked and when they
+    are admitted); without it the file is always read (to tell whether it changed)."""
     from ndt_cli.io.multiscan import split_spec
 
     file, index = split_spec(path)
+    try:
+        st = file.stat()
+    except OSError:
+        return None
+    stamp = (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+    key = (file.resolve(), index)
+    known = _known.get(key)
+    if reuse and known is not None and known[0] == stamp:
+        return known[1]
     h = hashlib.sha256(b"" if index is None else f"#{index}".encode())
     try:
         with open(file, "rb") as fh:
@@ -41,6 +70,7 @@ def file_hash(path: Path) -> str | None:
                 h.update(chunk)
     except OSError:
         return None
+    _known[key] = (stamp, h.hexdigest())
     return h.hexdigest()
 
 

@@ -36,7 +36,7 @@ def summary(result: ChainResult, runtime_s: float) -> dict[str, Any]:
     return {
         "scans": [str(p) for p in result.scans],
         "scan_files": [str(p.resolve()) for p in result.scans],
-        "scan_sha256": [file_hash(p) for p in result.scans],
+        "scan_sha256": list(result.hashes) or [file_hash(p) for p in result.scans],
         "pose_files": dict(zip(result.names, pose_file_list(result), strict=True)),
         "transform_files": link_file_list(result),
         "anchor": result.anchor,

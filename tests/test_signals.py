@@ -1,0 +1,168 @@
+"""Signals to the commands of many processes: Ctrl-C twice (or ``timeout -s INT``, which signals
+the command and then its process group), SIGTERM to the process group, and SIGKILL to the
+main process. None hangs, none prints a worker's traceback, and no worker process outlives
+the command. The commands run in a process group of their own, as a terminal starts them."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from conftest import street_files
+
+ENV = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+CHAIN = [sys.executable, "-c", "from ndt_cli.cli import chain_app; chain_app()"]
+WATCH = [sys.executable, "-c", "from ndt_cli.cli import watch_app; watch_app()"]
+HANG = 90  # s: a command still running this long after its signals is hung
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def street(tmp_path_factory) -> list[Path]:
+    return street_files(tmp_path_factory.mktemp("street"), n_scans=4)[0]
+
+
+def _start(cmd: list[str], log: Path) -> subprocess.Popen:
+    """The command in a process group of its own (its id is the command's pid)."""
+    return subprocess.Popen(
+        cmd, stdout=subprocess.DEVNULL, stderr=log.open("w"), env=ENV, start_new_session=True
+    )
+
+
+def _workers(pid: int) -> list[int]:
+    """The child processes of ``pid`` (its worker processes)."""
+    children: list[int] = []
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        with contextlib.suppress(OSError):
+            children += [int(c) for c in (task / "children").read_text().split()]
+    return children
+
+
+def _wait_for_workers(proc: subprocess.Popen, n: int = 1) -> list[int]:
+    deadline = time.monotonic() + HANG
+    while time.monotonic() < deadline and proc.poll() is None:
+        found = _workers(proc.pid)
+        if len(found) >= n:
+            return found
+        time.sleep(0.05)
+    raise AssertionError("the command started no worker process")
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    try:  # a zombie (dead, its parent not told yet) is not alive
+        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def _gone(pids: list[int], limit: float = 20.0) -> bool:
+    deadline = time.monotonic() + limit
+    while time.monotonic() < deadline:
+        if not any(_alive(p) for p in pids):
+            return True
+        time.sleep(0.1)
+    return False
+
+
+def _ended(proc: subprocess.Popen, log: Path) -> int:
+    """The exit code; a command that does not end is killed, with its group, and fails."""
+    try:
+        return proc.wait(timeout=HANG)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        pytest.fail(f"hung after its signals: {log.read_text()[-300:]}")
+
+
+def _interrupt_twice(proc: subprocess.Popen, gap: float = 0.05) -> None:
+    """Ctrl-C pressed twice, ``gap`` seconds apart (as ``timeout -s INT`` sends it)."""
+    os.killpg(proc.pid, signal.SIGINT)
+    time.sleep(gap)
+    os.killpg(proc.pid, signal.SIGINT)
+
+
+@pytest.mark.parametrize("when", [0.0, 1.0, 3.0])
+def test_ctrl_c_twice_never_hangs_the_chain(when, street, tmp_path):
+    log = tmp_path / "log"
+    proc = _start([*CHAIN, *map(str, street), "-o", str(tmp_path / "o"), "-j", "1", "-q"], log)
+    workers = _wait_for_workers(proc)
+    time.sleep(when)
+    _interrupt_twice(proc)
+    assert _ended(proc, log) == 130, log.read_text()
+    text = log.read_text()
+    assert "Traceback" not in text and len(text.strip().splitlines()) == 1, text
+    assert _gone(workers)
+
+
+@pytest.mark.parametrize("when", [0.5, 3.0])
+def test_ctrl_c_twice_never_hangs_field_mode(when, street, tmp_path):
+    card = tmp_path / "card"
+    card.mkdir()
+    for f in street:
+        os.link(f, card / f.name)
+    log = tmp_path / "log"
+    proc = _start([*WATCH, str(card), "-o", str(tmp_path / "o"), "-j", "2"], log)
+    workers = _wait_for_workers(proc, 2)
+    time.sleep(when)
+    _interrupt_twice(proc)
+    assert _ended(proc, log) == 130, log.read_text()
+    text = log.read_text()
+    assert "Traceback" not in text and text.strip().splitlines()[-1].startswith("ndt-watch:")
+    assert _gone(workers)
+
+
+def _command(command: str, street: list[Path], tmp_path: Path) -> list[str]:
+    """``ndt-chain`` of the street, or ``ndt-watch`` of a folder it has landed in."""
+    out = str(tmp_path / "o")
+    if command == "chain":
+        return [*CHAIN, *map(str, street), "-o", out, "-j", "2", "-q"]
+    card = tmp_path / "card"
+    card.mkdir()
+    for f in street:
+        os.link(f, card / f.name)
+    return [*WATCH, str(card), "-o", out, "-j", "2"]
+
+
+@pytest.mark.parametrize("command", ["chain", "watch"])
+def test_sigterm_to_the_group_is_one_line_and_exit_130(command, street, tmp_path):
+    """What systemd, ``timeout`` and session managers send: the workers, which get it too,
+    finish their tasks; only the command speaks."""
+    log = tmp_path / "log"
+    proc = _start(_command(command, street, tmp_path), log)
+    workers = _wait_for_workers(proc, 2)
+    time.sleep(2.0)
+    os.killpg(proc.pid, signal.SIGTERM)
+    assert _ended(proc, log) == 130, log.read_text()
+    text = log.read_text()
+    assert "Traceback" not in text and "KeyboardInterrupt" not in text, text
+    assert text.strip().splitlines()[-1].startswith(f"ndt-{command}: error:")
+    assert _gone(workers)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+@pytest.mark.parametrize("command", ["chain", "watch"])
+def test_workers_never_outlive_the_main_process(command, sig, street, tmp_path):
+    """The main process alone killed (the OOM killer, ``kill PID``): its workers end too."""
+    log = tmp_path / "log"
+    proc = _start(_command(command, street, tmp_path), log)
+    workers = _wait_for_workers(proc, 2)
+    time.sleep(1.0)
+    proc.send_signal(sig)
+    _ended(proc, log)
+    try:
+        assert _gone(workers), "worker processes outlived the command"
+    finally:
+        for pid in workers:
+            if _alive(pid):
+                os.kill(pid, signal.SIGKILL)
