@@ -65,7 +65,7 @@ def test_json_on_stdout_and_config_and_init(pair, tmp_path):
     assert res.exit_code == 0, res.output
     data = json.loads(res.stdout)
     assert data["converged"] is True
-    assert len(data["levels"]) == 5 and data["levels"][0]["starts"] == 25  # no start search
+    assert [lv["cell_size"] for lv in data["levels"]] == [2.0, 1.0]  # no search, from 2 m cells
     assert "method: lm" in (tmp_path / "o" / "config_used.yaml").read_text()
 
 

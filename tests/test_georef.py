@@ -230,10 +230,10 @@ def test_a_station_named_by_a_file_name_two_folders_share_is_refused(tmp_path):
     """north/scan.xyz and south/scan.xyz: 'scan.xyz' names neither (the last one used to be
     taken, silently); the outputs' names do."""
     files = []
-    for side in ("north", "south"):
+    for k, side in enumerate(("north", "south")):
         (tmp_path / side).mkdir()
         files.append(tmp_path / side / "scan.xyz")
-        files[-1].write_text("0 0 0\n1 0 0\n0 1 0\n")
+        files[-1].write_text(f"{k} 0 0\n1 0 0\n0 1 0\n")  # two scans, not one copied
     (tmp_path / "control.csv").write_text("scan.xyz,1,2,3\n")
     args = [*map(str, files), "--out", str(tmp_path / "out"), "--control"]
     res = runner.invoke(chain_app, [*args, str(tmp_path / "control.csv")])
