@@ -102,9 +102,15 @@ def run_case(case: Case, cfg: Config, jobs: int) -> tuple[trust.TrustCounts, dic
     return counts, detail
 
 
+def _label(name: str, width: int = 88) -> str:
+    """The case's name cut after its last whole item that fits in ``width`` characters."""
+    cut = name.rfind(", ", 0, width)
+    return name if len(name) <= width else name[: cut if cut > 0 else width]
+
+
 def _row(name: str, c: trust.TrustCounts, d: dict) -> str:
     return (
-        f"{name[:62]:62s} scans {c.scans_ok:2d}/{c.scans:2d} ok, "
+        f"{_label(name):88s} scans {c.scans_ok:2d}/{c.scans:2d} ok, "
         f"FA {c.scan_false_alarms:2d}, "
         f"wrong ok {c.scan_wrong_ok}, split {c.scans_split} | "
         f"links {c.links_ok:2d}/{c.links:2d} ok, "

@@ -64,11 +64,11 @@ class ForestWorld:
         return Ground(grade=self.slope * np.cos(a), cross_fall=self.slope * np.sin(a))
 
     def describe(self) -> str:
-        """A short label of the plot."""
+        """A short label of the plot (what tells it from the others first)."""
         rows, cols = self.shape
-        where = "a line" if min(rows, cols) == 1 else "a grid"
-        parts = [f"seed {self.seed}", f"forest, {rows}x{cols} scans ({where})"]
-        parts.append(f"slope {100 * self.slope:g}% towards {self.slope_deg:g} deg")
+        where = "line" if min(rows, cols) == 1 else "grid"
+        parts = [f"seed {self.seed}", f"forest {rows}x{cols} {where}"]
+        parts.append(f"slope {100 * self.slope:g}% to {self.slope_deg:g} deg")
         parts.append(f"{self.stems:g} stems/ha, {self.leaning:.0%} leaning")
         parts.append(f"{self.shrubs:g} shrubs/ha, {self.logs:g} logs/ha")
         parts.append(f"spacing {self.spacing[0]:g}-{self.spacing[1]:g} m")
