@@ -76,7 +76,7 @@ def districts(quick: bool) -> list[DistrictWorld]:
             D(
                 seed=71,
                 blocks=(1, 2),
-                pitch=(44.0, 48.0),
+                pitch=(60.0, 56.0),
                 spacing=22.0,
                 spur=25.0,
                 heading_deg=15.0,
