@@ -1,5 +1,5 @@
-"""Deterministic terrestrial-laser-scanner simulator of street scenes and building interiors
-(tests, samples, benchmarks).
+"""Deterministic terrestrial-laser-scanner simulator of street scenes, city districts, building
+interiors and forest plots (tests, samples, benchmarks).
 
 Frames: the **world frame** (right-handed, z up, ground z = 0, the street along x) and each
 **scanner frame**; ``T_world_scan`` maps scanner points into the world. The same seed always
@@ -7,6 +7,8 @@ gives bit-identical output.
 """
 
 from ndt_cli.sim.campaigns import Survey, block_loop, junction, route, shuffled, two_sites
+from ndt_cli.sim.district import DistrictWorld, scan_district
+from ndt_cli.sim.forest import ForestWorld, scan_forest
 from ndt_cli.sim.ground import Ground
 from ndt_cli.sim.indoor import FloorWorld, floor_scene, scan_floor
 from ndt_cli.sim.scanner import make_sequence, scanner_pose, simulate_scan
@@ -14,7 +16,9 @@ from ndt_cli.sim.scene import Scene, make_street
 from ndt_cli.sim.worlds import StreetWorld, passers_by, scan_street
 
 __all__ = [
+    "DistrictWorld",
     "FloorWorld",
+    "ForestWorld",
     "Ground",
     "Scene",
     "StreetWorld",
@@ -26,7 +30,9 @@ __all__ = [
     "make_street",
     "passers_by",
     "route",
+    "scan_district",
     "scan_floor",
+    "scan_forest",
     "scan_street",
     "scanner_pose",
     "shuffled",

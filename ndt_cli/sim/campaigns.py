@@ -54,7 +54,7 @@ def _street(seed: int, a: tuple[float, float], b: tuple[float, float], clear: tu
     )
 
 
-def _stations(path: Sequence[tuple[float, float]], spacing: float) -> np.ndarray:
+def stations_along(path: Sequence[tuple[float, float]], spacing: float) -> np.ndarray:
     """(n,2) world points every ``spacing`` m along a polyline, its first vertex included."""
     pts = [np.asarray(path[0], float)]
     carry = 0.0
@@ -69,7 +69,7 @@ def _stations(path: Sequence[tuple[float, float]], spacing: float) -> np.ndarray
     return np.array(pts)
 
 
-def _near(scene: Scene, xy: np.ndarray, reach: float = _REACH) -> Scene:
+def within_reach(scene: Scene, xy: np.ndarray, reach: float = _REACH) -> Scene:
     """The objects of ``scene`` within ``reach`` m of world ``xy`` (a faster cast, the same
     hits: nothing farther is within the scanner's range)."""
     c = 0.5 * (scene.boxes_min[:, :2] + scene.boxes_max[:, :2])  # box centres, box axes
@@ -102,7 +102,7 @@ def _survey(
         T = scanner_pose(p[0], p[1], rng.uniform(-180.0, 180.0), height)
         noise = int(rng.integers(0, 2**31 - 1))
         pts = simulate_scan(
-            _near(scene, p), T, n_azimuth=rays[0], n_elevation=rays[1], seed=noise + k
+            within_reach(scene, p), T, n_azimuth=rays[0], n_elevation=rays[1], seed=noise + k
         )
         scans.append(pts)
         poses.append(T)
@@ -121,8 +121,8 @@ def junction(seed: int = 0, spacing: float = 16.0, rays: tuple[int, int] = RAYS)
     side = _street(seed + 1, (0.0, _HALF), (0.0, 140.0))
     scene = main.merged(side)
     path = [(-64.0, 0.0), (0.0, 0.0), (0.0, 80.0)]
-    out = _stations(path, spacing)
-    back = _stations([(0.0, 0.0), (64.0, 0.0)], spacing)[1:]
+    out = stations_along(path, spacing)
+    back = stations_along([(0.0, 0.0), (64.0, 0.0)], spacing)[1:]
     return _survey(scene, np.vstack([out, back]), seed, rays)
 
 
@@ -165,7 +165,7 @@ def block_loop(
     x0, x1, y1 = -0.5 * size[0], 0.5 * size[0], size[1]
     scene = _block_scene(seed, x0, x1, y1, 80.0)
     path = [(x0 - 32.0, 0.0), (x1, 0.0), (x1, y1), (x0, y1), (x0, 0.0), (x0 + spacing, 0.0)]
-    return _survey(scene, _stations(path, spacing), seed, rays)
+    return _survey(scene, stations_along(path, spacing), seed, rays)
 
 
 def route(
@@ -175,7 +175,7 @@ def route(
     is the only thing that grows (benchmarks)."""
     length = spacing * (n_scans - 1)
     scene = _street(seed, (-60.0, 0.0), (length + 60.0, 0.0))
-    return _survey(scene, _stations([(0.0, 0.0), (length, 0.0)], spacing), seed, rays)
+    return _survey(scene, stations_along([(0.0, 0.0), (length, 0.0)], spacing), seed, rays)
 
 
 def shuffled(survey: Survey, seed: int = 0) -> Survey:
@@ -204,7 +204,7 @@ def two_sites(
         a = (origin[0] - 0.5 * length, origin[1])
         b = (origin[0] + 0.5 * length, origin[1])
         scene = _street(seed + 10 * site, (a[0] - 60.0, a[1]), (b[0] + 60.0, b[1]))
-        parts.append(_survey(scene, _stations([a, b], spacing), seed + site, rays, "ab"[site]))
+        parts.append(_survey(scene, stations_along([a, b], spacing), seed + site, rays, "ab"[site]))
     first, second = parts
     return Survey(
         first.scene.merged(second.scene),

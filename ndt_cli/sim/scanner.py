@@ -110,7 +110,7 @@ def _cast(
         _hit_boxes(scene.boxes_min[pick], scene.boxes_max[pick], turned, t_best, max_range)
     _hit_cylinders(scene, rays, t_best, max_range)
     if len(scene.crowns):
-        _hit_crowns(scene.crowns, origin, dirs, t_best, foliage or np.random.default_rng(0))
+        _hit_crowns(scene.crowns, rays, t_best, foliage or np.random.default_rng(0))
     return t_best
 
 
@@ -181,32 +181,51 @@ def _hit_boxes(
 
 
 def _hit_crowns(
-    crowns: np.ndarray,
-    origin: np.ndarray,
-    dirs: np.ndarray,
-    t_best: np.ndarray,
-    rng: np.random.Generator,
+    crowns: np.ndarray, rays: _Rays, t_best: np.ndarray, rng: np.random.Generator
 ) -> None:
     """Lower ``t_best`` where a ray is stopped inside a porous crown: at an exponentially
     distributed depth (mean ``1 / density`` m) past where it enters, if that is before it
-    leaves. Crowns are few: one vectorised pass over the rays each."""
+    leaves. Each crown is tested against the rays whose azimuth can reach it (its horizontal
+    circle of the larger radius, as seen from the scanner), in the order of the rays."""
+    origin, dirs = rays.origin, rays.dirs
     for x, y, z, rx, ry, rz, density in crowns:
+        idx = _rays_towards(rays, x - origin[0], y - origin[1], max(rx, ry))
+        if not len(idx):
+            continue
         scale = np.array([rx, ry, rz])
         o = (origin - (x, y, z)) / scale
-        d = dirs / scale
+        d = dirs[idx] / scale
         a = np.einsum("ij,ij->i", d, d)
         b = d @ o
         c = float(o @ o) - 1.0
         disc = b * b - a * c
-        cand = np.flatnonzero(disc > 0.0)
-        if not len(cand):
+        inside = np.flatnonzero(disc > 0.0)
+        if not len(inside):
             continue
-        root = np.sqrt(disc[cand])
-        t0 = np.maximum((-b[cand] - root) / a[cand], 0.0)
-        t1 = (-b[cand] + root) / a[cand]
+        cand = idx[inside]
+        root = np.sqrt(disc[inside])
+        t0 = np.maximum((-b[inside] - root) / a[inside], 0.0)
+        t1 = (-b[inside] + root) / a[inside]
         t = t0 + rng.exponential(1.0 / density, len(cand))
         hit = (t < t1) & (t1 > 0.0) & (t < t_best[cand])
         t_best[cand[hit]] = t[hit]
+
+
+def _rays_towards(rays: _Rays, dx: float, dy: float, radius: float) -> np.ndarray:
+    """Indices (ascending) of the rays whose line meets, in azimuth, the horizontal circle of
+    ``radius`` m centred ``(dx, dy)`` m from the origin: those pointing into it and those
+    pointing away from it (whose backward extension meets it; every ray when the origin is in
+    it). The lines, not only the rays: a crown behind the scanner draws its depths too, so
+    that the foliage's draws do not depend on this cull."""
+    dist = float(np.hypot(dx, dy))
+    if dist <= radius:
+        return np.arange(len(rays.dirs))
+    centre = np.arctan2(dy, dx)
+    half = np.arcsin(radius / dist) + 1e-9
+    lo = np.array([centre - half, centre + np.pi - half])
+    item, start, end = _angle_ranges(lo, lo + 2.0 * half, rays.sorted_az)
+    _, pos = _pairs(item, start, end)
+    return np.sort(rays.order[pos])
 
 
 def _hit_cylinders(scene: Scene, rays: _Rays, t_best: np.ndarray, max_range: float) -> None:
