@@ -12,8 +12,7 @@ z = 0, ``T_world_scan`` maps scanner points into the world. Layouts (``layout``)
 - ``double``: a corridor along x with rooms on both sides (an office floor);
 - ``single``: rooms on one side, windows along the other side of the corridor;
 - ``open``: an open-plan hall with a grid of columns and rows of desks, and a corridor of
-  rooms along one side;
-- ``ell``: two double-loaded wings meeting at a right angle (an L-shaped floor).
+  rooms along one side.
 
 Deterministic in the seed.
 """
