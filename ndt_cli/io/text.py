@@ -86,7 +86,14 @@ class TextReader(PointReader):
             part = xyz[start : start + chunk_points]
             yield {a: np.ascontiguousarray(part[:, k]) for k, a in enumerate("xyz")}
 
-    def read_xyz(self, path: Path) -> np.ndarray:
+    def check(self, path: Path) -> None:
+        """Raise unless a row of x y z numbers starts among the first lines."""
+        if _first_data_row(self._head(path)) is None:
+            raise InputError(f"no row of x y z numbers in its first {_HEAD_LINES} lines", path)
+
+    @staticmethod
+    def _head(path: Path) -> list[str]:
+        """The leading lines (decimal commas refused)."""
         try:
             with path.open(encoding="utf-8-sig") as fh:
                 head = [line for _, line in zip(range(_HEAD_LINES), fh, strict=False)]
@@ -101,6 +108,10 @@ class TextReader(PointReader):
                     "write the numbers with decimal points",
                     path,
                 )
+        return head
+
+    def read_xyz(self, path: Path) -> np.ndarray:
+        head = self._head(path)
         n_header = _first_data_row(head)
         if n_header is None:
             return np.empty((0, 3))
