@@ -54,7 +54,7 @@ def probe(path: Path) -> Probe:
         look = _LOOKS.get(path.suffix.lower(), _text)
         return look(path, head)
     except OSError as exc:
-        return Probe(FileKind.UNREADABLE, f"cannot read ({exc.strerror or one_line(exc)})")
+        return Probe(FileKind.UNREADABLE, exc.strerror or one_line(exc))
     except InputError as exc:
         return Probe(FileKind.UNREADABLE, exc.message)
 
