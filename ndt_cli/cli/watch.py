@@ -34,7 +34,10 @@ if TYPE_CHECKING:
     from ndt_cli.cli.watch_screen import Screen
     from ndt_cli.config import Config
     from ndt_cli.pipeline.campaign import NetworkOptions
+    from ndt_cli.pipeline.executors import Executor
     from ndt_cli.pipeline.field import FieldCampaign
+    from ndt_cli.pipeline.field_events import Started
+    from ndt_cli.pipeline.result import ChainResult
 
 watch_app = new_app()
 
@@ -181,16 +184,16 @@ def _run(cfg: Config, opts: _Options, screen: Screen) -> int:
     """Watch until idle or stopped, showing each event; the exit code."""
     import signal
 
-    from ndt_cli.errors import UserInterruptError, caused_by_interrupt
+    from ndt_cli.errors import EXIT_INTERRUPTED, UserInterruptError, caused_by_interrupt
     from ndt_cli.pipeline.executors import ExecutorKind, make_executor
 
     pool = make_executor(ExecutorKind.LOCAL, opts.jobs)
     pool.start()  # before this process starts threads of its own
     stop = _Stop()
     signal.signal(signal.SIGTERM, stop.terminate)  # after the workers started: theirs stays
-    field = _field(cfg, opts, pool)
-    why = "idle"
+    field, why = None, "idle"
     try:
+        field = _field(cfg, opts, pool)
         screen.show(_started(opts, pool))
         _loop(field, opts, screen)
     except BaseException as exc:
@@ -199,6 +202,8 @@ def _run(cfg: Config, opts: _Options, screen: Screen) -> int:
         why = "terminated" if stop.terminated else "interrupted"
     finally:
         pool.close()
+    if field is None:  # stopped before the watch began
+        return EXIT_INTERRUPTED
     stopped = field.stopped(why, opts.out)
     screen.show(stopped)
     return stopped.exit_code
@@ -214,7 +219,7 @@ class _Stop:
         raise KeyboardInterrupt
 
 
-def _field(cfg: Config, opts: _Options, pool: object) -> FieldCampaign:
+def _field(cfg: Config, opts: _Options, pool: Executor) -> FieldCampaign:
     """The field campaign over the folder, publishing into ``opts.out``."""
     import time
     from functools import partial
@@ -229,7 +234,7 @@ def _field(cfg: Config, opts: _Options, pool: object) -> FieldCampaign:
     t0 = time.perf_counter()
     make = partial(Campaign, cfg, opts.out, pool, network=opts.net, resume=True)
 
-    def write(result: object) -> None:
+    def write(result: ChainResult) -> None:
         write_chain_outputs(opts.out, result, cfg, time.perf_counter() - t0, command_line())
 
     skip = tuple(p for p in (opts.control,) if p is not None)
@@ -239,7 +244,7 @@ def _field(cfg: Config, opts: _Options, pool: object) -> FieldCampaign:
     return FieldCampaign(make, watch, publisher, stations=bool(opts.net.stations))
 
 
-def _started(opts: _Options, pool: object) -> object:
+def _started(opts: _Options, pool: Executor) -> Started:
     from ndt_cli.pipeline.field_events import Started
 
     control = None if opts.control is None else str(opts.control)
@@ -256,20 +261,20 @@ def _started(opts: _Options, pool: object) -> object:
     )
 
 
-QUIET_KINDS = ("skipped", "folder")  # events that are no activity: the idle clock runs on
-
-
 def _loop(field: FieldCampaign, opts: _Options, screen: Screen) -> None:
     """Look, register, show; until idle (``opts.idle``) or stopped. Idle counts from the last
     event that is activity, or the last file seen changing."""
     import time
 
+    from ndt_cli.pipeline.field_events import EventKind
+
+    quiet = (EventKind.SKIPPED, EventKind.FOLDER)  # no activity: the idle clock runs on
     last = time.monotonic()
     while True:
         active = False
         for event in field.step():
             screen.show(event)
-            active |= event.kind.value not in QUIET_KINDS
+            active |= event.kind not in quiet
         if active or field.busy:
             last = time.monotonic()
         if opts.idle is not None and time.monotonic() - last >= opts.idle:
