@@ -20,7 +20,7 @@ from pathlib import Path
 import laspy
 import numpy as np
 import pytest
-from field_tools import ENV, SAMPLE, Events, start_watch, write_slowly
+from field_tools import ENV, SAMPLE, WATCH, Events, start_watch, write_slowly
 
 from ndt_cli.core.transforms import transform_errors
 from ndt_cli.io.matrices import read_pose_list
@@ -288,3 +288,16 @@ def test_the_watched_folder_gone_and_back_is_said(tmp_path):
     text = run.stderr()
     gone, back = text.find("cannot be read (card pulled out?)"), text.find("can be read again")
     assert 0 < gone < back, text
+
+
+def test_a_json_reader_gone_away_is_one_line_and_exit_2(tmp_path):
+    card = tmp_path / "card"
+    card.mkdir()
+    cmd = [*WATCH, str(card), "--out", str(tmp_path / "out"), "-j", "1", "--json"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ENV, text=True)
+    assert json.loads(proc.stdout.readline())["event"] == "started"
+    proc.stdout.close()  # the reader stops (`ndt-watch --json | head -1`)
+    (card / "notes.txt").write_text("no points here\n")  # an event to write
+    assert proc.wait(60) == 2
+    err = proc.stderr.read().strip().splitlines()
+    assert err == ["ndt-watch: error: stdout was closed: the program reading --json stopped"]

@@ -52,8 +52,7 @@ class Screen:
 
     def show(self, event: Event) -> None:
         if self.json_out:
-            sys.stdout.write(json.dumps(event_dict(event), ensure_ascii=False) + "\n")
-            sys.stdout.flush()
+            _write_json(event)
             return
         if self.quiet and not _needs_you(event):
             return
@@ -75,6 +74,20 @@ class Screen:
         for k, part in enumerate(parts):
             part.rstrip()
             self.console.print(Text(" " * (indent if k == 0 else hang)) + part, crop=False)
+
+
+def _write_json(event: Event) -> None:
+    """The event's JSON line on stdout, at once; a reader gone away is a one-line error."""
+    import os
+
+    from ndt_cli.errors import OutputError
+
+    try:
+        sys.stdout.write(json.dumps(event_dict(event), ensure_ascii=False) + "\n")
+        sys.stdout.flush()
+    except BrokenPipeError:
+        sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - nothing more is written there
+        raise OutputError("stdout was closed: the program reading --json stopped") from None
 
 
 def _needs_you(event: Event) -> bool:
@@ -141,7 +154,8 @@ def _verdict(v: Verdict) -> str:
     """The verdict, coloured, with the position and the reason when not ok."""
     style = STYLES.get("apart" if v.status.value == "ok" and v.cluster else v.status.value, "")
     word = f"[{style}]{_esc(v.label)}[/]" if style else _esc(v.label)
-    where = "" if v.position is None else " at ({:.2f}, {:.2f}, {:.2f}) m".format(*v.position)
+    shown = v.position is not None and v.cluster == 0  # elsewhere: its cluster's own frame
+    where = " at ({:.2f}, {:.2f}, {:.2f}) m".format(*v.position) if shown else ""
     why = f" ({_esc(v.reason)})" if v.reason and v.label != "ok" else ""
     return f"{word}{why}{where}"
 
