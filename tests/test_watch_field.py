@@ -161,8 +161,12 @@ def test_a_broken_first_scan_waits_and_never_becomes_the_anchor(tmp_path):
     run = start_watch(card, out, tmp_path / "log", "--json", "--exit-when-idle", "4")
     run.wait_for(lambda ev: len(ev.of("placed")) == 2)
     shutil.copy(SAMPLE / "scan_00.laz", card / "scan_00.laz")
+    os.utime(card / "scan_01.laz")  # touched: the same content, nothing to do
+    shutil.copy(SAMPLE / "scan_02.laz", card / "scan_02.laz")  # copied again, the same
     assert run.wait(240) == 0, run.stderr()
     ev = run.events
+    assert [e["event"] for e in ev.about("scan_01.laz")] == ["landed", "placed"]
+    assert [e["event"] for e in ev.about("scan_02.laz")] == ["landed", "placed"]
     assert ev.of("unreadable")[0]["file"] == "scan_00.laz"
     assert ev.of("unreadable")[0]["state"] == "unreadable"
     assert not ev.of("fits_nowhere")
