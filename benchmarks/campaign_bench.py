@@ -5,7 +5,7 @@ renamed into the watched folder until its outputs are published)."""
 
 from __future__ import annotations
 
-import re
+import json
 import shutil
 import subprocess
 import tempfile
@@ -107,7 +107,11 @@ def order_ratio() -> None:
     target("ndt-chain of a shuffled street / in order", ratio, 2.0, "<= 2", "x")
 
 
-_TOOK = re.compile(r"; ([0-9.]+) s \(([0-9.]+) s since it landed\)")
+def _placed(events: Path) -> list[dict]:
+    """The placed (or fits_nowhere) events ndt-watch --json has printed so far."""
+    lines = events.read_text().splitlines()
+    found = [json.loads(line) for line in lines if line.endswith("}")]
+    return [e for e in found if e["event"] in ("placed", "fits_nowhere")]
 
 
 def watch_latency() -> None:
@@ -117,22 +121,20 @@ def watch_latency() -> None:
     files, _ = data.street()
     rows, warm = [], []
     with tempfile.TemporaryDirectory() as tmp:
-        folder, out, log = Path(tmp) / "card", Path(tmp) / "field", Path(tmp) / "watch.log"
+        folder, out, events = Path(tmp) / "card", Path(tmp) / "field", Path(tmp) / "events"
         folder.mkdir()
         proc = subprocess.Popen(
-            [WATCH, str(folder), "--out", str(out), "-j", "2", "--exit-when-idle", "5"],
-            stderr=log.open("w"),
+            [WATCH, str(folder), "--out", str(out), "-j", "2", "--exit-when-idle", "5", "--json"],
+            stdout=events.open("w"),
         )
         for k, f in enumerate(files):
             shutil.copy(f, folder / f".{f.name}.part")
             landed = time.time()
             (folder / f".{f.name}.part").rename(folder / f.name)
-            while proc.poll() is None and len(log.read_text().splitlines()) < k + 1:
+            while proc.poll() is None and len(_placed(events)) < k + 1:
                 time.sleep(0.05)
-            line = log.read_text().splitlines()[k]
             since = time.time() - landed
-            m = _TOOK.search(line)
-            took = float(m.group(1)) if m else float("nan")
+            took = _placed(events)[k]["took_s"]
             rows.append([f.name, f"{data.las_points(f) / 1e6:.2f}", fmt(took), fmt(since)])
             if k >= 2:
                 warm.append(since)

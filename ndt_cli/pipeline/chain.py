@@ -31,9 +31,9 @@ def plan_links(n_scans: int, unreadable: set[int]) -> list[tuple[int, int]]:
     return [(k.target, k.source) for k in classic_chain(n_scans, unreadable)]
 
 
-def scene_of(cfg: Config, scans: Sequence[str | Path]) -> Config:
+def scene_of(cfg: Config, scans: Sequence[str | Path], level: int = logging.INFO) -> Config:
     """``cfg`` for the scene of the campaign (``scene.kind`` auto: what the first readable of
-    ``scans`` sees above it, :func:`~ndt_cli.ndt.prepare.settle_scene`)."""
+    ``scans`` sees above it, :func:`~ndt_cli.ndt.prepare.settle_scene`); logged at ``level``."""
     if cfg.scene.kind != "auto":
         return cfg
     view = None
@@ -44,7 +44,7 @@ def scene_of(cfg: Config, scans: Sequence[str | Path]) -> Config:
         except NdtError:
             continue
     settled, why = settle_scene(cfg, view)
-    log.info("scene %s", why)
+    log.log(level, "scene %s", why)
     return settled
 
 

@@ -1,80 +1,198 @@
-"""Field mode: a folder watched for scans, each registered into the campaign once it has landed.
+"""Field mode's eye on a folder: which files appeared, changed or went, and when each has
+settled (is no longer being written).
 
-A scan has *landed* when its file is complete: its size and modification time have not changed
-for :data:`SETTLE_S` seconds (a scanner or a copy writing it slowly in place), or it was renamed
-in whole (then it is stable from the start). Hidden files and the temporary names of copies
-(``.part``, ``.tmp``, ``.crdownload``) are ignored until renamed. Scans are taken in the order
-they landed (modification time, then natural order of names), which is the campaign's order.
+A file has *settled* when its size, modification and change times and inode have not changed
+for ``settle_s`` seconds (a scanner or a copy writing it slowly in place), or it was renamed in
+whole. A file is handed out (:attr:`Look.settled`) once per state it settles in: again when it
+changes and settles again (a copy over it, a permission fixed), or once more when asked
+(:meth:`FolderWatch.again`: a file that could not be read is looked at once more after the
+settle time). Hidden files, the temporary names of copies (``.part``, ``.tmp``,
+``.crdownload``), other suffixes and the files given in ``skip`` (the run's control file) are
+never looked at; an empty file only once it has bytes (or when it was handed out before: a
+copy over it has begun). Settled files come in the order they landed (modification time, then
+natural order of names): the campaign's order.
+
+The watch is *busy* while a file it has not been told to leave alone (:meth:`FolderWatch.
+leave_alone`: no scan) is new, changing or settling, for at most ``hold_s`` seconds of changes
+in a row: an empty file is not looked at, and a file that never settles (a log appended to all
+the time) holds the watch no longer than that, so an idle watch always ends.
 """
 
 from __future__ import annotations
 
+import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from ndt_cli.pipeline.scans import natural_key
 
-SETTLE_S = 0.5  # s a file's size and time must stay the same before it counts as complete
+SETTLE_S = 0.5  # s a file's size and times must stay the same before it counts as complete
 TEMPORARY = (".part", ".tmp", ".crdownload", ".partial")
+MISSING_LOOKS = 2  # looks in a row a handed-out file must be missing to count as gone
+
+Signature = tuple[int, int, int, int]  # size (bytes), modification and change time (ns), inode
+
+
+def signature(path: Path) -> Signature | None:
+    """A file's size, times and inode now (None when it cannot be stat-ed)."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino
 
 
 @dataclass(frozen=True)
-class Landed:
-    """A scan file that has landed, and when (its modification time, s since the epoch)."""
+class Settled:
+    """A file handed out: its path, its signature, its modification time (s since the epoch)
+    and when the watch found it settled (``time.monotonic()``, s)."""
 
     path: Path
+    signature: Signature
     mtime: float
+    seen: float
+
+
+@dataclass(frozen=True)
+class Look:
+    """One look at the folder: the files settled since the last look (in landing order), the
+    handed-out files gone, whether the watch is busy, and whether the folder could be read."""
+
+    settled: tuple[Settled, ...] = ()
+    gone: tuple[Path, ...] = ()
+    busy: bool = False
+    present: bool = True
 
 
 @dataclass
+class _File:
+    """What the watch knows of one file."""
+
+    signature: Signature
+    since: float  # monotonic s of its last change
+    began: float  # monotonic s of the first of its latest changes in a row
+    handed: Signature | None = None  # the state it was last handed out in
+    quiet: bool = False  # left alone: its changes keep nobody busy
+    retry: Signature | None = None  # the state it is handed out once more in
+    retried: Signature | None = None
+    missing: int = 0  # looks in a row it was not found
+
+
 class FolderWatch:
-    """The scans of ``folder`` (files whose suffix is one of ``suffixes``) as they land.
+    """The files of ``folder`` whose suffix is one of ``suffixes`` (see the module docstring):
+    :meth:`look` reports what settled and what went since the last look."""
 
-    :meth:`poll` returns the files that have landed since the last call, in landing order.
-    """
+    def __init__(
+        self,
+        folder: Path,
+        suffixes: tuple[str, ...],
+        settle_s: float = SETTLE_S,
+        skip: tuple[Path, ...] = (),
+        hold_s: float = float("inf"),
+    ) -> None:
+        self.folder, self.suffixes, self.settle_s = folder, suffixes, settle_s
+        self.hold_s = hold_s
+        self.skip = {_real(p) for p in skip}
+        self.files: dict[Path, _File] = {}
 
-    folder: Path
-    suffixes: tuple[str, ...]
-    settle_s: float = SETTLE_S
-    seen: dict[Path, tuple[int, int, float]] = field(default_factory=dict)  # size, mtime, since
-    done: set[Path] = field(default_factory=set)
+    def look(self, now: float | None = None) -> Look:
+        """What settled and what went since the last look (see the module docstring)."""
+        now = time.monotonic() if now is None else now
+        listed = self._listing()
+        if listed is None:
+            return Look(present=False)
+        settled, busy = [], False
+        for path in listed:
+            sig = signature(path)
+            if sig is not None:
+                state, found = self._update(path, sig, now)
+                busy |= state
+                settled += [Settled(path, sig, sig[1] / 1e9, now)] if found else []
+        gone = self._gone(set(listed))
+        settled.sort(key=lambda s: (s.mtime, natural_key(s.path.name)))
+        return Look(tuple(settled), gone, busy)
 
-    def _candidates(self) -> list[Path]:
-        try:
-            entries = list(self.folder.iterdir())
-        except OSError:
-            return []
+    def leave_alone(self, path: Path) -> None:
+        """The file is no scan: its changes keep the watch busy no more (it is still handed
+        out again when it changes and settles)."""
+        if path in self.files:
+            self.files[path].quiet = True
+
+    def again(self, path: Path, now: float | None = None) -> None:
+        """Hand the file out once more after the settle time, unchanged (once per state)."""
+        f = self.files.get(path)
+        if f is not None and f.retried != f.signature:
+            f.retry = f.signature
+            f.since = time.monotonic() if now is None else now
+
+    def writing(self) -> list[Path]:
+        """Files with bytes, not left alone, not handed out in their present state: being
+        written (or settling)."""
         return [
             p
-            for p in entries
+            for p, f in self.files.items()
+            if f.handed != f.signature and f.signature[0] and not f.quiet
+        ]
+
+    def _listing(self) -> list[Path] | None:
+        """The folder's files to look at, or None when the folder cannot be read."""
+        try:
+            entries = list(os.scandir(self.folder))
+        except OSError:
+            return None
+        paths = [Path(e.path) for e in entries]
+        return [
+            p
+            for p in paths
             if not p.name.startswith(".")
             and p.suffix.lower() in self.suffixes
             and not p.name.lower().endswith(TEMPORARY)
-            and p not in self.done
+            and _real(p) not in self.skip
         ]
 
-    def poll(self, now: float | None = None) -> list[Landed]:
-        """The files complete since the last call (see the module docstring)."""
-        now = time.monotonic() if now is None else now
-        landed = []
-        for path in self._candidates():
-            try:
-                st = path.stat()
-            except OSError:  # renamed or removed meanwhile
-                continue
-            state = (st.st_size, st.st_mtime_ns)
-            before = self.seen.get(path)
-            if before is None or before[:2] != state:
-                self.seen[path] = (*state, now)
-            elif st.st_size > 0 and now - before[2] >= self.settle_s:
-                landed.append(Landed(path, st.st_mtime_ns / 1e9))
-        for scan in landed:
-            self.done.add(scan.path)
-            self.seen.pop(scan.path, None)
-        return sorted(landed, key=lambda s: (s.mtime, natural_key(s.path.name)))
+    def _update(self, path: Path, sig: Signature, now: float) -> tuple[bool, bool]:
+        """Note the file's state: (whether it keeps the watch busy, whether it settled)."""
+        f = self.files.get(path)
+        if f is None or f.signature != sig:
+            quiet = f is not None and f.quiet
+            handed = None if f is None else f.handed
+            streak = f is not None and f.handed != f.signature and now - f.since < self.settle_s
+            began = f.began if f is not None and streak else now
+            self.files[path] = _File(sig, now, began, handed, quiet)
+            return self._holds(self.files[path], now), False
+        f.missing = 0
+        if f.signature[0] == 0 and f.handed is None:
+            return False, False  # empty, never handed out: not looked at
+        settling = now - f.since < self.settle_s
+        if f.handed == sig and f.retry != sig:
+            return False, False
+        if settling:
+            return self._holds(f, now), False
+        f.handed, f.retried = sig, f.retry if f.retry == sig else f.retried
+        f.retry = None
+        return False, True
 
-    @property
-    def pending(self) -> int:
-        """Files seen that have not landed yet."""
-        return len(self.seen)
+    def _holds(self, f: _File, now: float) -> bool:
+        """Whether a file that changed keeps the watch busy (see the module docstring)."""
+        looked_at = f.signature[0] > 0 or f.handed is not None
+        return not f.quiet and looked_at and now - f.began < self.hold_s
+
+    def _gone(self, listed: set[Path]) -> tuple[Path, ...]:
+        """Handed-out files missing :data:`MISSING_LOOKS` looks in a row (others are
+        forgotten at once)."""
+        gone = []
+        for path in [p for p in self.files if p not in listed]:
+            f = self.files[path]
+            f.missing += 1
+            if f.handed is None or f.missing >= MISSING_LOOKS:
+                del self.files[path]
+                gone += [path] if f.handed is not None else []
+        return tuple(sorted(gone, key=lambda p: natural_key(p.name)))
+
+
+def _real(path: Path) -> Path:
+    try:
+        return path.resolve()
+    except OSError:
+        return path.absolute()
