@@ -4,8 +4,9 @@ A link is known by the key of its inputs: both scans' contents (file hashes), wh
 target, and the config. Every finished link is written at once to ``links/<key>.json``
 (atomically), so an interrupted campaign resumes where it stopped, and a campaign whose scans
 were renamed, reordered or joined by more scans finds every link it already registered. What
-the campaign needs of each scan without reading it again (its sketch for the overlap search
-and its preview for the top view) is kept there too, under the key of the scan.
+the campaign needs of each scan without reading it again (its sketch for the overlap search,
+its preview for the top view and its slice sample for the report) is kept there too, under the
+key of the scan.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from ndt_cli.ndt.bnb import ScoreField
 from ndt_cli.ndt.overlap import Sketch
 from ndt_cli.ndt.result import RegistrationResult, Status
 from ndt_cli.pipeline.network import LinkKind
+from ndt_cli.pipeline.samples import SliceSample
 
 LINK_FOLDER = "links"
 _FORMAT = 4  # version of the link files: older ones are recomputed, not misread
@@ -132,9 +134,14 @@ class LinkStore:
             return None
         return link if link.key == key else None
 
-    def save_scan(self, scan_key: str, preview: np.ndarray, sketch: Sketch) -> None:
+    def save_scan(
+        self, scan_key: str, preview: np.ndarray, sketch: Sketch, sample: SliceSample | None
+    ) -> None:
         """Keep what the campaign needs of a scan without reading it again."""
         arrays = {f"slice_{k}": s for k, s in enumerate(sketch.slices)}
+        if sample is not None:
+            arrays |= {f"inspect_{k}": s for k, s in enumerate(sample.slices)}
+            arrays |= {"inspect_heights": np.array(sample.heights, dtype=float)}
         field = sketch.field
         with atomic.atomic_open(self.folder / f"scan_{scan_key[:40]}.npz", "wb") as fh:
             np.savez(
@@ -148,13 +155,20 @@ class LinkStore:
                 **arrays,
             )
 
-    def load_scan(self, scan_key: str) -> tuple[np.ndarray, Sketch] | None:
-        """A scan's preview and sketch, if kept."""
+    def load_scan(self, scan_key: str) -> tuple[np.ndarray, Sketch, SliceSample | None] | None:
+        """A scan's preview, sketch and slice sample (None when an older run kept none), if
+        kept."""
         try:
             with np.load(self.folder / f"scan_{scan_key[:40]}.npz") as z:
                 n = sum(name.startswith("slice_") for name in z.files)
                 slices = tuple(z[f"slice_{k}"] for k in range(n))
                 field = ScoreField(z["field"], z["origin"], float(z["resolution"]), z["centre"])
-                return z["preview"], Sketch(slices, field, z["to_local"])
+                sketch = Sketch(slices, field, z["to_local"])
+                sample = None
+                if "inspect_heights" in z.files:
+                    heights = tuple(float(h) for h in z["inspect_heights"])
+                    cut = tuple(z[f"inspect_{k}"] for k in range(len(heights)))
+                    sample = SliceSample(sketch.to_local, heights, cut)
+                return z["preview"], sketch, sample
         except (OSError, ValueError, KeyError):
             return None
