@@ -138,14 +138,19 @@ def test_map_coordinates_count_from_a_round_origin_and_never_read_in_exponents()
     assert "e+" not in tick_label(5.8001e6)
 
 
+def _w(dx: float, dy: float) -> np.ndarray:
+    """World (x, y) m of a point ``dx``, ``dy`` m from 500000, 5800000 (map coordinates)."""
+    return np.array([500_000.0 + dx, 5_800_000.0 + dy])
+
+
 def _georeferenced() -> Scene:
     """A street in UTM-like numbers: two scans, an unchecked link, two control stations (the
     second rejected)."""
     o = np.array([500_000.0, 5_800_000.0])
-    a = Scan("a", 0, NodeStatus.OK, o + [10.0, 10.0], _block(tuple(o + [30.0, 10.0])))
-    b = Scan("b", 1, NodeStatus.OK, o + [10.0, 90.0], _block(tuple(o + [30.0, 90.0])))
+    a = Scan("a", 0, NodeStatus.OK, _w(10.0, 10.0), _block(tuple(_w(30.0, 10.0))))
+    b = Scan("b", 1, NodeStatus.OK, _w(10.0, 90.0), _block(tuple(_w(30.0, 90.0))))
     edges = (Edge(a.position, b.position, EdgeStyle.UNCHECKED),)
-    stations = (Station("a", o + [10.0, 10.0], True), Station("b", o + [60.0, 90.0], False))
+    stations = (Station("a", _w(10.0, 10.0), True), Station("b", _w(60.0, 90.0), False))
     return Scene((a, b), edges, None, ("title",), origin_of(o + np.array([[0, 0], [60, 90]])),
                  stations)  # fmt: skip
 
@@ -160,12 +165,11 @@ def _near(pixels: np.ndarray, scene: Scene, xy, colour: str, reach: int = 2) -> 
 def test_stations_and_unchecked_links_are_drawn_where_the_world_puts_them():
     scene = _georeferenced()
     pixels = _pixels(scene)
-    o = np.array([500_000.0, 5_800_000.0])
     s = 10.0 / view_of(scene).scale  # m: the diamond's half-diagonal (10 px)
-    assert _near(pixels, scene, o + [60.0 + s / 2, 90.0 - s / 2], REJECTED)  # its outline
-    assert not _near(pixels, scene, o + [60.0, 90.0], REJECTED)  # a diamond: hollow
-    assert _near(pixels, scene, o + [10.0 - s / 2, 10.0 - s / 2], STATION)  # the used one
-    dashes = [_at(pixels, scene, tuple(o + [10.0, y])) for y in np.arange(25.0, 75.0, 0.25)]
+    assert _near(pixels, scene, _w(60.0 + s / 2, 90.0 - s / 2), REJECTED)  # its outline
+    assert not _near(pixels, scene, _w(60.0, 90.0), REJECTED)  # a diamond: hollow
+    assert _near(pixels, scene, _w(10.0 - s / 2, 10.0 - s / 2), STATION)  # the used one
+    dashes = [_at(pixels, scene, tuple(_w(10.0, y))) for y in np.arange(25.0, 75.0, 0.25)]
     blue = sum(np.abs(p - rgb(UNCHECKED)).max() <= 60 for p in dashes)
     light = sum(p.min() > 200 for p in dashes)  # the gaps (and their soft edges)
     assert blue >= 10 and light >= 10  # dashed slate blue, never a solid green line

@@ -3,8 +3,9 @@ slices overlaid (:mod:`ndt_cli.report.inspect`, drawn by :mod:`ndt_cli.report.in
 and a caption with its state, residual, strength and the spread of its slices' residuals.
 
 Kept links (confirmed or not checked) are shown; the others (rejected, not used, left out of
-the network) are there on demand. The pictures are made from the scans' slice samples the run
-kept (:mod:`ndt_cli.pipeline.samples`): no scan is read again.
+the network) are there on demand, the first :data:`MAX_ON_DEMAND` of them drawn. The pictures
+are made from the scans' slice samples the run kept (:mod:`ndt_cli.pipeline.samples`): no scan
+is read again.
 """
 
 from __future__ import annotations
@@ -18,6 +19,8 @@ from ndt_cli.report.inspect import LinkView, link_view
 from ndt_cli.report.inspect_png import inspector_png
 
 KEPT_WORDS = ("confirmed", "not checked")
+MAX_ON_DEMAND = 100  # pictures of registrations not kept; beyond, their captions only (a
+# picture costs about 60 ms and 7 kB: a campaign of thousands stays a file a browser opens)
 
 
 def _lines(row: LinkRow, view: LinkView | None) -> tuple[str, ...]:
@@ -43,21 +46,24 @@ def _lines(row: LinkRow, view: LinkView | None) -> tuple[str, ...]:
         how = (
             ""
             if spread is None
-            else f"; residual median {spread[0]:.1f} cm, 90 % {spread[1]:.1f} cm"
+            else f"; residual median {spread[0]:.1f} cm, upper quartile {spread[1]:.1f} cm"
         )
         lines.append(f"{s.height:g} m: {matched}{how}")
     return tuple(lines)
 
 
-def _card(result: ChainResult, link: Link, row: LinkRow) -> LinkCard:
+def _card(result: ChainResult, link: Link, row: LinkRow, draw: bool) -> LinkCard:
     samples = result.samples or {}
     t, s = samples.get(link.target), samples.get(link.source)
     view = None
-    if t is not None and s is not None and link.T_target_source is not None:
+    if draw and t is not None and s is not None and link.T_target_source is not None:
         view = link_view(link.T_target_source, t, s)
     png = None if view is None else inspector_png(view)
     title = f"{row.target} <- {row.source}"
-    return LinkCard(row.figure, title, row.state, png, _lines(row, view), row.state in KEPT_WORDS)
+    lines = _lines(row, view)
+    if not draw:
+        lines = (*lines[:-1], f"slices not drawn: more than {MAX_ON_DEMAND} links not kept")
+    return LinkCard(row.figure, title, row.state, png, lines, row.state in KEPT_WORDS)
 
 
 def link_cards(
@@ -66,9 +72,10 @@ def link_cards(
     """A card per registration with a transform: the network's links (rows in the order of
     ``result.links``), then those tried and left out (``result.tried``)."""
     every = [*result.links, *(t.link for t in result.tried)]
-    rows = [*links, *tried]
-    return tuple(
-        _card(result, link, row)
-        for link, row in zip(every, rows, strict=True)
-        if link.result is not None
-    )
+    cards, other = [], 0
+    for link, row in zip(every, [*links, *tried], strict=True):
+        if link.result is None:
+            continue
+        other += row.state not in KEPT_WORDS
+        cards.append(_card(result, link, row, row.state in KEPT_WORDS or other <= MAX_ON_DEMAND))
+    return tuple(cards)

@@ -109,9 +109,9 @@ def _controls(result: ChainResult) -> tuple[tuple[ControlRow, ...], str]:
                 reason=r["reason"],
             )
         )
-    scale = result.grid_scale
+    scale, line = result.grid_scale, world_line(result)
     note = (
-        f"{world_line(result).capitalize()}. Grid scale applied at the scanners: {scale:.8f} "
+        f"{line[:1].upper()}{line[1:]}. Grid scale applied at the scanners: {scale:.8f} "
         "(grid distance / ground distance" + ("; 1: none)." if scale == 1.0 else ").")
     )
     return tuple(rows), note

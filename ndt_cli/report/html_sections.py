@@ -216,7 +216,7 @@ def control_section(rows: tuple[ControlRow, ...], note: str, number: int) -> str
 
 def _card(card: LinkCard, img: Callable[[bytes, str], str]) -> str:
     picture = img(card.png, f"slices of {card.title}") if card.png else ""
-    lines = "".join(f"<br>{esc(line)}" for line in card.lines)
+    lines = "<br>".join(esc(line) for line in card.lines)
     caption = f"<figcaption><b>{esc(card.title)} {badge(card.state)}</b>{lines}</figcaption>"
     if card.kept:
         return f'<figure class="link" id="{esc(card.anchor)}">{picture}{caption}</figure>'
@@ -233,7 +233,8 @@ _INSPECTOR_LEGEND = (
     '<span class="key" style="background:#ff7f0e"></span> source. A right link draws one '
     "outline where the scans see the same walls, poles and cars; a wrong one draws two, "
     "offset or turned. The residuals are the distances of the source's points from the "
-    "target's outline nearby (median and 90th percentile): about 1–2 cm on a right link.</p>"
+    "target's outline nearby (median and upper quartile): a median under 1 cm on a right "
+    "link.</p>"
 )
 
 
