@@ -93,8 +93,9 @@ def fitted(console: Any, layouts: Sequence[Sequence[Col]], title: str) -> Any | 
 
 
 def print_blocks(console: Any, cols: Sequence[Col], title: str, head: int = 1) -> None:
-    """Each row as lines ``header: value`` under its first ``head`` cells (when no table
-    fits: names longer than the terminal)."""
+    """Each row as its first ``head`` cells, then a line ``header: value`` per other cell,
+    indented (when no table fits: names longer than the terminal)."""
+    from rich.padding import Padding
     from rich.text import Text
 
     console.print(Text(title, style="italic"), soft_wrap=False)
@@ -103,8 +104,8 @@ def print_blocks(console: Any, cols: Sequence[Col], title: str, head: int = 1) -
         console.print(first, soft_wrap=False, overflow="fold")
         for c, v in zip(cols[head:], row[head:], strict=True):
             if str(v):
-                label = c.header.replace("\n", " ")
-                console.print(Text(f"  {label}: ") + _text(v), soft_wrap=False, overflow="fold")
+                line = Text(f"{c.header.replace(chr(10), ' ')}: ") + _text(v)
+                console.print(Padding(line, (0, 0, 0, 2)), soft_wrap=False, overflow="fold")
 
 
 def print_fitted(console: Any, layouts: Sequence[Sequence[Col]], title: str, head: int = 1) -> None:
