@@ -84,7 +84,8 @@ footer { margin-top: 2em; border-top: 1px solid var(--rule); padding-top: 0.5em;
     border: none; border-bottom: 1px solid #eceff2; text-align: left; white-space: normal; }
   table.data td::before { content: attr(data-label); font-weight: 600; color: var(--grey);
     overflow-wrap: normal; }
-  table.data td.name { background: var(--head); font-weight: 600; }
+  table.data td.name { display: block; background: var(--head); font-weight: 600; }
+  table.data td.name::before { display: block; font-weight: 400; }
   table.data td.empty { text-align: left; }
   table.data td > .st { justify-self: start; }
   .table-wrap { overflow-x: visible; }
@@ -95,7 +96,7 @@ footer { margin-top: 2em; border-top: 1px solid var(--rule); padding-top: 0.5em;
   body { font-size: 9pt; max-width: none; padding: 0; }
   table.data { font-size: 7.5pt; }
   th, td { padding: 2px 3px; }
-  td.name { min-width: 0; }
+  td.name { min-width: 5.5em; }
   .table-wrap { overflow: visible; }
   h2 { break-after: avoid; }
   tr, figure, .verdict, table.kv { break-inside: avoid; }

@@ -165,7 +165,9 @@ _LEGEND = (
 )
 
 
-def tables(scans: tuple[ScanRow, ...], links: tuple[LinkRow, ...], n_scans: int, n_links: int):
+def tables(
+    scans: tuple[ScanRow, ...], links: tuple[LinkRow, ...], n_scans: int, n_links: int
+) -> str:
     """The sections of the scan table and the link table (numbered ``n_scans``, ``n_links``)."""
     scan_table = data_table(scans, _SCAN_COLUMNS, _SCAN_GROUPS, "scans")
     link_table = data_table(links, _LINK_COLUMNS, _LINK_GROUPS, "links")

@@ -30,7 +30,11 @@ def _panel_origin(k: int) -> tuple[int, int]:
     return GAP + k * (PANEL + GAP), HEAD
 
 
-def _dots(pixels: np.ndarray, xy: np.ndarray, box: tuple[float, float, float], k: int, colour):
+Box = tuple[float, float, float]  # x0, y0, side (m, the target's frame)
+RGB = tuple[int, int, int]
+
+
+def _dots(pixels: np.ndarray, xy: np.ndarray, box: Box, k: int, colour: RGB) -> None:
     """Points of the target's frame (m) as squares in panel ``k`` (supersampled pixels)."""
     x0, y0, side = box
     left, top = _panel_origin(k)
@@ -83,7 +87,7 @@ def inspector_png(view: LinkView) -> bytes:
     return out.getvalue()
 
 
-def _draw_slice(pixels: np.ndarray, s: SliceView, box: tuple[float, float, float], k: int):
+def _draw_slice(pixels: np.ndarray, s: SliceView, box: Box, k: int) -> None:
     """The target's points, then the source's on top."""
     _dots(pixels, s.target, box, k, TARGET)
     _dots(pixels, s.source, box, k, SOURCE)

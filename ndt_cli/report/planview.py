@@ -84,6 +84,9 @@ class Edge:
     residual_cm: float = 0.0
 
 
+XY = tuple[float, float]  # world (x, y), m
+
+
 @dataclass(frozen=True)
 class Station:
     """A control station at its given coordinates (world m), used by the adjustment or not."""
@@ -102,7 +105,7 @@ class Scene:
     edges: tuple[Edge, ...]
     top_cm: float | None
     title: tuple[str, ...]
-    origin: tuple[float, float] = (0.0, 0.0)
+    origin: XY = (0.0, 0.0)
     stations: tuple[Station, ...] = ()
 
 
@@ -169,7 +172,7 @@ def tick_label(metres: float) -> str:
 GEOREFERENCED_M = 10_000.0  # coordinates beyond this count from a round origin
 
 
-def origin_of(xy: np.ndarray) -> tuple[float, float]:
+def origin_of(xy: np.ndarray) -> XY:
     """The origin the axes count from: (0, 0), or the centre of the points rounded to 100 m
     when they lie farther than :data:`GEOREFERENCED_M` from it (map coordinates)."""
     if not len(xy) or np.abs(xy).max() < GEOREFERENCED_M:
@@ -257,7 +260,9 @@ def vectors(image: Any, view: View, scene: Scene, ticks: tuple[np.ndarray, np.nd
     _legend(pen, view, scene.scans, y + 10 * SS, face)
 
 
-def _frame(pen: Any, view: View, ticks: tuple[np.ndarray, np.ndarray], face: Any, origin) -> None:
+def _frame(
+    pen: Any, view: View, ticks: tuple[np.ndarray, np.ndarray], face: Any, origin: XY
+) -> None:
     left, top, right, bottom = view.area
     pen.rectangle([left, top, right, bottom], outline=INK, width=SS)
     xs, ys = ticks
@@ -274,7 +279,9 @@ def _dashes(a: np.ndarray, b: np.ndarray, dash: float) -> list[tuple[np.ndarray,
     return [(a + (b - a) * t[k], a + (b - a) * t[k + 1]) for k in range(0, n, 2)]
 
 
-def _edge(pen: Any, a: np.ndarray, b: np.ndarray, style: EdgeStyle, cm: float, top: float | None):
+def _edge(
+    pen: Any, a: np.ndarray, b: np.ndarray, style: EdgeStyle, cm: float, top: float | None
+) -> None:
     dashed = {EdgeStyle.REJECTED: REJECTED, EdgeStyle.UNCHECKED: UNCHECKED}
     if style in dashed:
         for p, q in _dashes(a, b, 6.0 * SS):
@@ -313,7 +320,7 @@ def _station(pen: Any, p: np.ndarray, station: Station, face: Any) -> None:
     pen.text((c, r + s + 2 * SS), label, fill=colour, font=face, anchor="mt")
 
 
-def _axis_labels(image: Any, pen: Any, view: View, face: Any, origin) -> None:
+def _axis_labels(image: Any, pen: Any, view: View, face: Any, origin: XY) -> None:
     from PIL import Image, ImageDraw
 
     left, top, right, bottom = view.area
