@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import logging
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from types import TracebackType
 from typing import Any
 
@@ -66,21 +66,25 @@ class ChainProgress:
 
     def _start_bar(self) -> None:
         from rich.console import Console
-        from rich.progress import (
-            BarColumn,
-            MofNCompleteColumn,
-            Progress,
-            TextColumn,
-            TimeElapsedColumn,
-        )
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+        from rich.text import Text
 
-        self._bar = Progress(
-            TextColumn("{task.description}"),
+        class TwoLines(Progress):
+            """The stage or the link at work on a line of its own (wrapped, never cut: names
+            are long), the bar with its counts below it."""
+
+            def get_renderables(self) -> Iterator[Any]:
+                for task in self.tasks:
+                    yield Text(task.description, overflow="fold")
+                yield self.make_tasks_table(self.tasks)
+
+        self._bar = TwoLines(
             BarColumn(bar_width=None),
             MofNCompleteColumn(),
             TimeElapsedColumn(),
             console=Console(file=sys.stderr),
             transient=False,
+            expand=True,
         )
         self._bar.start()
         self._task = self._bar.add_task("starting", total=None)
@@ -105,12 +109,12 @@ class ChainProgress:
             self._bar.update(self._task, description=record.getMessage())
 
     def _describe(self) -> None:
-        """The bar's text: the link at work (and how many more), its count."""
-        if not self.at_work:
-            return
-        more = f" (+{len(self.at_work) - 1})" if len(self.at_work) > 1 else ""
-        text = f"registering {self._pair(self.at_work[0])}{more}"
-        self._bar.update(self._task, description=text, total=self.total, completed=self.done)
+        """The bar's counts, and its text: the link at work (and how many more)."""
+        self._bar.update(self._task, total=self.total, completed=self.done)
+        if self.at_work:
+            more = f" (+{len(self.at_work) - 1})" if len(self.at_work) > 1 else ""
+            text = f"registering {self._pair(self.at_work[0])}{more}"
+            self._bar.update(self._task, description=text)
 
     def link_done(self, link: Any) -> None:
         """One link finished: its line (above the bar on a terminal), the counts."""
