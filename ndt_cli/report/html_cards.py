@@ -10,12 +10,15 @@ is read again.
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from collections.abc import Iterable
+from dataclasses import dataclass
 
 from ndt_cli.pipeline.links import Link
 from ndt_cli.pipeline.result import ChainResult
+from ndt_cli.pipeline.samples import SliceSample
 from ndt_cli.report.html import LinkCard, LinkRow
-from ndt_cli.report.inspect import LinkView, link_view
+from ndt_cli.report.inspect import link_view
 from ndt_cli.report.inspect_png import inspector_png
 
 KEPT_WORDS = ("confirmed", "not checked")
@@ -23,7 +26,39 @@ MAX_ON_DEMAND = 100  # pictures of registrations not kept; beyond, their caption
 # picture costs about 60 ms and 7 kB: a campaign of thousands stays a file a browser opens)
 
 
-def _lines(row: LinkRow, view: LinkView | None) -> tuple[str, ...]:
+CACHED = 4000  # pictures kept between reports (field mode publishes after every scan)
+
+
+@dataclass(frozen=True)
+class Picture:
+    """A link's picture (PNG) and, per slice, its height (m), the source's points that match
+    and all of them, and the spread of their residuals (cm: median, upper quartile)."""
+
+    png: bytes
+    slices: tuple[tuple[float, int, int, tuple[float, float] | None], ...]
+
+
+_pictures: OrderedDict[str, Picture] = OrderedDict()
+
+
+def picture(link: Link, target: SliceSample, source: SliceSample) -> Picture:
+    """The link's :class:`Picture`. A link is known by its key (its scans' content and the
+    configuration), so its picture is the same in every report of a process: it is drawn once
+    (``ndt-watch`` publishes a report after every scan)."""
+    if link.key and link.key in _pictures:
+        _pictures.move_to_end(link.key)
+        return _pictures[link.key]
+    view = link_view(link.T_target_source, target, source)
+    stats = tuple((s.height, s.matched, len(s.source), s.spread_cm()) for s in view.slices)
+    found = Picture(inspector_png(view), stats)
+    if link.key:
+        _pictures[link.key] = found
+        while len(_pictures) > CACHED:
+            _pictures.popitem(last=False)
+    return found
+
+
+def _lines(row: LinkRow, view: Picture | None) -> tuple[str, ...]:
     """The caption: registration, residual, strength, and each slice's residual spread."""
     if row.residual_cm is not None:
         residual = f"residual {row.residual_cm:.2f} cm, {row.residual_deg:.4f}°"
@@ -40,15 +75,13 @@ def _lines(row: LinkRow, view: LinkView | None) -> tuple[str, ...]:
     if view is None:
         lines.append("slices: not kept by this run")
         return tuple(lines)
-    for s in view.slices:
-        spread = s.spread_cm()
-        matched = f"{s.matched} of {len(s.source)} source points match"
+    for height, matched, points, spread in view.slices:
         how = (
             ""
             if spread is None
             else f"; residual median {spread[0]:.1f} cm, upper quartile {spread[1]:.1f} cm"
         )
-        lines.append(f"{s.height:g} m: {matched}{how}")
+        lines.append(f"{height:g} m: {matched} of {points} source points match{how}")
     return tuple(lines)
 
 
@@ -57,8 +90,8 @@ def _card(result: ChainResult, link: Link, row: LinkRow, draw: bool) -> LinkCard
     t, s = samples.get(link.target), samples.get(link.source)
     view = None
     if draw and t is not None and s is not None and link.T_target_source is not None:
-        view = link_view(link.T_target_source, t, s)
-    png = None if view is None else inspector_png(view)
+        view = picture(link, t, s)
+    png = None if view is None else view.png
     title = f"{row.target} <- {row.source}"
     lines = _lines(row, view)
     if not draw:
