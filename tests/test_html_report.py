@@ -12,7 +12,9 @@ import html
 import io
 import math
 import os
+import re
 import shutil
+from dataclasses import replace
 from datetime import UTC, datetime
 from html.parser import HTMLParser
 from pathlib import Path
@@ -22,8 +24,10 @@ import pytest
 
 from ndt_cli.report.html import (
     STATUS_CLASSES,
+    ControlRow,
     Figure,
     HtmlReport,
+    LinkCard,
     LinkRow,
     ScanRow,
     Verdict,
@@ -94,7 +98,7 @@ def _links(scans: tuple[ScanRow, ...]) -> tuple[LinkRow, ...]:
     pairs = [("adjacent", k, k + 1) for k in range(11)] + [("skip", 2, 4), ("loop", 0, 11)]
     pairs.append(("user", 5, 8))
     statuses = ["ok", "suspect", "degenerate", "failed", "not_converged", "no_overlap"]
-    states = ["used", "confirmed", "rejected", "used"]
+    states = ["not checked", "confirmed", "rejected", "not checked"]
     return tuple(
         LinkRow(
             kind=kind,
@@ -106,29 +110,93 @@ def _links(scans: tuple[ScanRow, ...]) -> tuple[LinkRow, ...]:
             overlap=0.8 - 0.02 * i,
             ambiguity=0.35 if i % 3 else None,
             icp_rms_cm=1.2 + 0.1 * i,
-            residual_deg=0.0123,
-            residual_cm=0.87,
+            residual_deg=None if states[i % len(states)] == "not checked" else 0.0123,
+            residual_cm=None if states[i % len(states)] == "not checked" else 0.87,
             warnings=(f"weak direction along the street {SCRIPT}", "overlap below 0.3")
             if i == 1
             else (),
+            strength_mm=(3.2, 2.4, 4000.0 if i == 2 else 4.1),
+            figure=f"link-{i}",
         )
         for i, (kind, a, b) in enumerate(pairs)
+    )
+
+
+def _controls() -> tuple[ControlRow, ...]:
+    """Three stations in map coordinates, one of them rejected (60 cm off)."""
+    return (
+        ControlRow(
+            HOSTILE,
+            (500100.0, 5400200.0, 101.5),
+            (500100.004, 5400200.01, 101.51),
+            (0.4, 1.0, 1.0),
+            2.0,
+            3.0,
+            "used",
+        ),
+        ControlRow(
+            "scan_05.laz",
+            (500160.6, 5400210.0, 102.0),
+            (500160.0, 5400210.0, 102.0),
+            (-60.0, 0.0, 0.0),
+            2.0,
+            3.0,
+            "rejected",
+            "rejected: misfit chi2 624 > 16.27",
+        ),
+        ControlRow(
+            "scan_09.laz",
+            (500250.0, 5400230.0, 103.0),
+            None,
+            None,
+            2.0,
+            3.0,
+            "not used",
+            "its scan is not in the anchor's cluster",
+        ),
+    )
+
+
+def _cards(links: tuple[LinkRow, ...], png: bytes) -> tuple[LinkCard, ...]:
+    """An inspector card per link: kept ones shown, the others on demand."""
+    kept = ("confirmed", "not checked")
+    return tuple(
+        LinkCard(
+            k.figure,
+            f"{k.target} <- {k.source}",
+            k.state,
+            png,
+            ("1 m: 12 of 20 match",),
+            k.state in kept,
+        )
+        for k in links
     )
 
 
 def _report(png: bytes) -> HtmlReport:
     """A report of a 12-scan street with hostile names, a figure and notes."""
     scans = _scans()
+    links = _links(scans)
     return HtmlReport(
         title=f"Registration report: street {SCRIPT} & more",
         command=f"ndt-chain scans/*.laz --out street/ --jobs 4 # {SCRIPT}",
         created=datetime(2025, 3, 14, 9, 26, 53, tzinfo=UTC),
         version="ndt-cli 0.2.0",
-        verdict=Verdict(ok=False, reason=f"link {HOSTILE} failed"),
+        verdict=Verdict(
+            ok=False,
+            reason=f"link {HOSTILE} failed",
+            remarks=(f"scan {LONG} left out (unposed): {SCRIPT}", "control station x rejected"),
+        ),
         summary=(("scans", "12"), ("links", "14"), ("anchor", HOSTILE)),
+        network=(("registrations tried", "15"), ("a-posteriori σ (unit weight)", "0.91")),
+        controls=_controls(),
+        control_note="Grid scale applied at the scanners: 0.99960000",
         scans=scans,
-        links=_links(scans),
+        links=links,
         figures=(Figure(png=png, caption=f"Top view of {HOSTILE}"),),
+        cards=_cards(links, png),
+        tried=(replace(links[0], state="not_planned", figure=""),),
+        tried_note=(f"{LONG} (unposed): no link. Registrations tried for it: none",),
         config_yaml="grid:\n  cells: [20, 10, 5, 2, 1]\nname: '<&>'\n",
         notes=(f"Checked by <surveyor> & {SCRIPT}.",),
     )
@@ -208,15 +276,19 @@ def test_every_scan_and_link_is_present(png: bytes, page: str) -> None:
     links = page.split('id="links"', 1)[1].split("</table>", 1)[0]
     assert links.count("<tr>") == len(report.links) + 1
     for link in report.links:
-        row = f'<td class="word">{link.kind}</td><td>{html.escape(link.target)}</td>'
-        assert row + f"<td>{html.escape(link.source)}</td>" in links
+        row = f'<td class="name" data-label="target">{html.escape(link.target)}</td>'
+        row += f'<td class="name" data-label="source">{html.escape(link.source)}</td>'
+        assert row + f'<td class="word" data-label="kind">{link.kind}</td>' in links
 
 
 def test_figure_is_embedded_as_data_uri(png: bytes, page: str) -> None:
     uri = "data:image/png;base64," + base64.b64encode(png).decode("ascii")
     assert f'<img src="{uri}"' in page
     urls = _parsed(page).urls
-    assert urls and all(url.startswith("data:image/png;base64,") for url in urls)
+    images = [u for u in urls if not u.startswith("#")]  # links within the page: figures' ids
+    assert images and all(url.startswith("data:image/png;base64,") for url in images)
+    ids = set(re.findall(r' id="([^"]+)"', page))
+    assert {u[1:] for u in urls if u.startswith("#")} <= ids
     with pytest.raises(ValueError, match="not a PNG"):
         render_html(HtmlReport("t", "c", "now", "v", Verdict(True), figures=(Figure(b"GIF", "x"),)))
 
@@ -237,7 +309,8 @@ def test_status_is_coloured_and_written(page: str) -> None:
     assert '<span class="st st-bad">rejected</span>' in page
     assert '<span class="st st-bad">unposed</span>' in page
     assert '<span class="st st-bad">not converged</span>' in page
-    assert '<p class="verdict bad" id="verdict"><strong>Result: NOT OK</strong>' in page
+    assert '<span class="st st-info">not checked</span>' in page  # never green
+    assert '<div class="verdict bad" id="verdict"><p><strong>Result: NOT OK</strong>' in page
     assert status_class("Not-Converged") == "bad"
     assert status_class("something else") == "none"
 
@@ -245,9 +318,10 @@ def test_status_is_coloured_and_written(page: str) -> None:
 def test_numbers_units_and_missing_values(page: str) -> None:
     for header in ("x (m)", "yaw (deg)", "σx (cm)", "σyaw (deg)", "overlap (%)", "ICP RMS (cm)"):
         assert f'<th scope="col">{header}</th>' in page
-    assert '<td class="num">14.877</td>' in page  # x of scan 1: 15 - 0.123 m
-    assert '<td class="num">80.0</td>' in page  # overlap 0.8 shown in %
-    assert '<td class="empty">\u2013</td>' in page  # None and NaN
+    assert '<td class="num" data-label="x (m)">14.877</td>' in page  # x of scan 1: 15 - 0.123 m
+    assert '<td class="num" data-label="overlap (%)">80.0</td>' in page  # 0.8 shown in %
+    assert '<td class="empty" data-label="σy (cm)">\u2013</td>' in page  # NaN
+    assert '<td class="num" data-label="up">free</td>' in page  # 4 m: not pinned at all
     assert "nan" not in page.split("<tbody>", 1)[1].lower().split("</tbody>", 1)[0]
     assert "2025-03-14 09:26:53+00:00" in page
 
@@ -260,11 +334,16 @@ def test_empty_report_renders() -> None:
 
 def test_every_status_a_run_gives_is_coloured_and_no_other_word_is_listed() -> None:
     from ndt_cli.ndt.result import Status
+    from ndt_cli.pipeline.result import Dropped
     from ndt_cli.pipeline.verify import EdgeState, NodeStatus
+    from ndt_cli.report.html_chain import STATE_WORDS
 
-    produced = {s.value for s in (*Status, *NodeStatus, *EdgeState)} | {"anchor"}
-    assert set(STATUS_CLASSES) == produced - {EdgeState.UNUSED.value}
-    assert status_class(EdgeState.UNUSED) == "none"
+    words = {w.replace(" ", "_") for w in STATE_WORDS.values()} | {d.value for d in Dropped}
+    produced = {s.value for s in (*Status, *NodeStatus, *EdgeState)} | {"anchor"} | words
+    grey = {EdgeState.UNUSED.value, "not_used", *(d.value for d in Dropped)}
+    assert set(STATUS_CLASSES) == produced - grey
+    assert all(status_class(word) == "none" for word in grey)
+    assert status_class(STATE_WORDS[EdgeState.USED]) == "info"  # not checked: never green
     assert status_class(Status.NO_OVERLAP) == "bad" and status_class(NodeStatus.SUSPECT) == "warn"
 
 
@@ -351,7 +430,7 @@ def _check_pixels(shot: Any, boxes: dict[str, dict[str, float]]) -> None:
 def _boxes(pg: Any) -> dict[str, dict[str, float]]:
     """Bounding boxes of the figure, the scan table and two status badges."""
     handles = {
-        "img": pg.locator("figure img").first,
+        "img": pg.locator("#figures-section figure img").first,
         "table": pg.locator("table#scans"),
         "bad": pg.locator("span.st-bad", has_text="failed").first,
         "ok": pg.locator("#links span.st-ok", has_text="ok").first,
@@ -378,6 +457,44 @@ def _print_fits(pg: Any) -> None:
     assert pg.pdf(format="A4").startswith(b"%PDF")
 
 
+def _images_loaded(pg: Any) -> int:
+    """How many images the page holds, all of them decoded (those on demand too)."""
+    pg.evaluate("() => document.querySelectorAll('details').forEach(d => { d.open = true; })")
+    pg.wait_for_load_state("load")
+    loaded = pg.eval_on_selector_all(
+        "img", "els => els.map(i => i.complete && i.naturalWidth > 0 && i.naturalHeight > 0)"
+    )
+    assert loaded and all(loaded), loaded
+    return len(loaded)
+
+
+STACKED = """() => {
+  const rows = [...document.querySelectorAll('table.data tbody td')];
+  const heads = [...document.querySelectorAll('table.data thead')];
+  return {
+    hidden: heads.every(h => getComputedStyle(h).display === 'none'),
+    labelled: rows.every(td => getComputedStyle(td, '::before').content
+      === JSON.stringify(td.dataset.label)),
+    cells: rows.length,
+  };
+}"""
+
+
+def _fits_the_screen(pg: Any, width: int) -> None:
+    """At ``width`` px nothing scrolls sideways; on a phone the tables are stacked, every cell
+    preceded by its column's name."""
+    pg.set_viewport_size({"width": width, "height": 900})
+    widths = pg.evaluate(
+        "() => [document.documentElement.scrollWidth, window.innerWidth,"
+        " ...[...document.querySelectorAll('table, pre, figure, img, .verdict')]"
+        ".map(t => Math.ceil(t.getBoundingClientRect().right))]"
+    )
+    assert max(widths[0], *widths[2:]) <= widths[1], f"{width} px: sideways scroll {widths}"
+    stacked = pg.evaluate(STACKED)
+    assert stacked["cells"] > 100
+    assert stacked["hidden"] == stacked["labelled"] == (width < 720), (width, stacked)
+
+
 def test_page_in_real_browser(tmp_path: Path, png: bytes) -> None:
     from PIL import Image
 
@@ -398,9 +515,11 @@ def test_page_in_real_browser(tmp_path: Path, png: bytes) -> None:
             response = pg.goto(url, wait_until="load")
             assert response is None or response.ok
             assert pg.title().startswith("Registration report")
-            assert pg.locator("figure img").evaluate("i => i.complete && i.naturalWidth > 0")
+            assert _images_loaded(pg) == 1 + len(_report(png).cards)
             boxes = _boxes(pg)
             shot = Image.open(io.BytesIO(pg.screenshot(full_page=True))).convert("RGB")
+            for width in (1024, 400):
+                _fits_the_screen(pg, width)
             _print_fits(pg)
         finally:
             browser.close()
@@ -408,3 +527,35 @@ def test_page_in_real_browser(tmp_path: Path, png: bytes) -> None:
     assert all(r == url or r.startswith("data:") for r in requests), requests
     assert errors == []
     _check_pixels(shot, boxes)
+
+
+def test_verdict_names_what_it_rests_on_and_the_control_table_shows_every_station(
+    png: bytes, page: str
+) -> None:
+    verdict = page.split('id="verdict"', 1)[1].split("</div>", 1)[0]
+    assert f"<li>scan {html.escape(LONG)} left out (unposed): {html.escape(SCRIPT)}</li>" in verdict
+    assert "<li>control station x rejected</li>" in verdict
+    table = page.split('id="controls"', 1)[1].split("</table>", 1)[0]
+    assert table.count("<tr>") == len(_controls()) + 1
+    for station in _controls():
+        assert f'data-label="station">{html.escape(station.station)}</td>' in table
+    assert '<td class="num" data-label="ΔE">-60.0</td>' in table  # adjusted - given, cm
+    assert '<span class="st st-bad">rejected</span>' in table
+    assert '<td class="num" data-label="E">500160.600</td>' in table  # never 5.0016e+05
+    assert "0.99960000" in page.split('id="control-note"', 1)[1].split("</p>", 1)[0]
+
+
+def test_every_link_has_a_figure_kept_ones_shown_the_others_on_demand(page: str) -> None:
+    cards = re.findall(r'<figure class="link" id="(link-\d+)">(.*?)</figure>', page, re.S)
+    links = _links(_scans())
+    assert [c[0] for c in cards if "<details>" not in c[1]] == [
+        k.figure for k in links if k.state in ("confirmed", "not checked")
+    ]
+    for anchor, body in cards:
+        assert body.count("<img ") == 1, anchor
+        if "<details>" in body:  # on demand: the picture inside the closed details
+            assert body.index("<details>") < body.index("<img ")
+    for link in links:  # every row of the link table points at its figure
+        assert f'<a href="#{link.figure}">view</a>' in page
+    tried = page.split('id="tried"', 1)[1].split("</table>", 1)[0]
+    assert '<span class="st st-none">not planned</span>' in tried

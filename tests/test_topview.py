@@ -15,14 +15,19 @@ from ndt_cli.report.planview import (
     GRID,
     PLOT_MAX,
     PLOT_MIN,
+    REJECTED,
     SS,
+    STATION,
     TAB10,
+    UNCHECKED,
     VIRIDIS,
     Edge,
     EdgeStyle,
     Scan,
     Scene,
+    Station,
     nice_step,
+    origin_of,
     render,
     rgb,
     tick_label,
@@ -123,3 +128,48 @@ def test_grid_lines_at_round_world_coordinates():
     for x in free:
         assert np.abs(_at(pixels, scene, (x, 170.0)) - rgb(GRID)).max() <= 24
         assert (_at(pixels, scene, (x + step / 2, 170.0)) == 255).all()  # between lines: white
+
+
+def test_map_coordinates_count_from_a_round_origin_and_never_read_in_exponents():
+    utm = np.array([[500_123.4, 5_800_117.0], [500_268.0, 5_800_402.5]])
+    assert origin_of(utm) == (500_200.0, 5_800_300.0)  # the centre, rounded to 100 m
+    assert origin_of(np.array([[-40.0, 3.0], [120.0, 80.0]])) == (0.0, 0.0)  # a local frame
+    assert [tick_label(v) for v in (5_800_100.0, 12_000.0, -0.0001)] == ["5800100", "12000", "0"]
+    assert "e+" not in tick_label(5.8001e6)
+
+
+def _w(dx: float, dy: float) -> np.ndarray:
+    """World (x, y) m of a point ``dx``, ``dy`` m from 500000, 5800000 (map coordinates)."""
+    return np.array([500_000.0 + dx, 5_800_000.0 + dy])
+
+
+def _georeferenced() -> Scene:
+    """A street in UTM-like numbers: two scans, an unchecked link, two control stations (the
+    second rejected)."""
+    o = np.array([500_000.0, 5_800_000.0])
+    a = Scan("a", 0, NodeStatus.OK, _w(10.0, 10.0), _block(tuple(_w(30.0, 10.0))))
+    b = Scan("b", 1, NodeStatus.OK, _w(10.0, 90.0), _block(tuple(_w(30.0, 90.0))))
+    edges = (Edge(a.position, b.position, EdgeStyle.UNCHECKED),)
+    stations = (Station("a", _w(10.0, 10.0), True), Station("b", _w(60.0, 90.0), False))
+    return Scene((a, b), edges, None, ("title",), origin_of(o + np.array([[0, 0], [60, 90]])),
+                 stations)  # fmt: skip
+
+
+def _near(pixels: np.ndarray, scene: Scene, xy, colour: str, reach: int = 2) -> bool:
+    """A pixel of ``colour`` within ``reach`` px of world ``xy`` (lines are 1-2 px wide)."""
+    c, r = (view_of(scene, SS).px(np.array(xy)) / SS).astype(int)
+    patch = pixels[r - reach : r + reach + 1, c - reach : c + reach + 1]
+    return bool((np.abs(patch - rgb(colour)).max(axis=-1) <= 40).any())
+
+
+def test_stations_and_unchecked_links_are_drawn_where_the_world_puts_them():
+    scene = _georeferenced()
+    pixels = _pixels(scene)
+    s = 10.0 / view_of(scene).scale  # m: the diamond's half-diagonal (10 px)
+    assert _near(pixels, scene, _w(60.0 + s / 2, 90.0 - s / 2), REJECTED)  # its outline
+    assert not _near(pixels, scene, _w(60.0, 90.0), REJECTED)  # a diamond: hollow
+    assert _near(pixels, scene, _w(10.0 - s / 2, 10.0 - s / 2), STATION)  # the used one
+    dashes = [_at(pixels, scene, tuple(_w(10.0, y))) for y in np.arange(25.0, 75.0, 0.25)]
+    blue = sum(np.abs(p - rgb(UNCHECKED)).max() <= 60 for p in dashes)
+    light = sum(p.min() > 200 for p in dashes)  # the gaps (and their soft edges)
+    assert blue >= 10 and light >= 10  # dashed slate blue, never a solid green line

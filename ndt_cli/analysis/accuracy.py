@@ -1,13 +1,21 @@
 """Accuracy of ndt-register / ndt-chain results against reference poses.
 
 Ground truth is either a pose list (``name`` + 16 numbers of T_world_scan per line) or a pair
-list (``target source`` + 16 numbers of T_target_source per line). Errors are those of each
-link's T_target_source: rotation angle (degrees) and translation (metres) of the difference.
+list (``target source`` + 16 numbers of T_target_source per line). Errors are rotation angles
+(degrees) and translations (metres) of differences of transforms:
+
+- per link, of its ``T_target_source``; the success rates judge the links the network kept
+  (confirmed or used; every link of a result without a network), the others are listed;
+- per scan, of its pose relative to the anchor's, ``inv(T_world_anchor) @ T_world_scan``, so
+  that a result in any world frame (levelled, georeferenced) compares with a reference in any
+  other; a scan of the reference that the result does not give as ok in the anchor's frame
+  (unposed, suspect, another cluster) fails, and the reference's scans the result lacks are
+  named.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -24,15 +32,27 @@ from ndt_cli.pipeline.scans import scan_names
 DEFAULT_THRESHOLDS = ((2.0, 0.10), (0.1, 0.02))  # (degrees, metres)
 
 
+KEPT = ("confirmed", "used")  # the network states of the links a result rests on
+
+
 @dataclass(frozen=True)
 class Evaluation:
-    """Per-link errors (with the network's verdict on each link, when there is one), success
-    rates per threshold, and the end-of-chain drift of the adjusted and of the chained poses."""
+    """Per-link errors (with the network's verdict on each link, when there is one) and their
+    success rates per threshold (of the judged links), the end-of-chain drift of the adjusted
+    and of the chained poses; per scan of the reference in the result its status and error
+    relative to ``anchor`` (the result's anchor, or the first scan both give a pose when the
+    reference lacks it; None when there is no such scan) and their success rates, errors None
+    when the scan has no ok pose in the anchor's frame; the reference's scans the result lacks
+    (``missing``)."""
 
     links: list[dict[str, Any]]
     success: list[dict[str, Any]]
     drift: dict[str, Any] | None
     drift_chained: dict[str, Any] | None = None
+    scans: list[dict[str, Any]] = field(default_factory=list)
+    scan_success: list[dict[str, Any]] = field(default_factory=list)
+    missing: list[str] = field(default_factory=list)
+    anchor: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -40,6 +60,10 @@ class Evaluation:
             "success": self.success,
             "drift": self.drift,
             "drift_chained": self.drift_chained,
+            "anchor": self.anchor,
+            "scans": self.scans,
+            "scan_success": self.scan_success,
+            "missing": self.missing,
         }
 
 
@@ -75,6 +99,8 @@ class _Results:
     links: list[tuple[str, str, np.ndarray, str]]  # target, source, T, network state ('' if none)
     poses: dict[str, np.ndarray]  # T_world_scan of the adjusted (or chained) ok scans
     chained: dict[str, np.ndarray]  # T_world_scan along adjacent ok links, not adjusted
+    statuses: dict[str, str] = field(default_factory=dict)  # every scan's status, in order
+    anchor: str | None = None  # the scan whose frame the poses are relative to
 
 
 def _link_files(result_dir: Path, rows: list[dict[str, str]]) -> list[Path | None]:
@@ -108,9 +134,10 @@ def _read_results(result_dir: Path) -> _Results:
                 check_unchanged(result_dir, (f.name,))
                 state = row.get("network") or ""
                 links.append((row["target"], row["source"], read_matrix(f), state))
-        return _Results(
-            links, _poses(result_dir / "poses.txt"), _poses(result_dir / "poses_chain.txt")
-        )
+        poses = _poses(result_dir / "poses.txt")
+        statuses = _statuses(result_dir, poses)
+        anchor = _anchor(result_dir, list(statuses))
+        return _Results(links, poses, _poses(result_dir / "poses_chain.txt"), statuses, anchor)
     single = result_dir / "T_target_source.txt"
     if single.exists():
         check_unchanged(result_dir, ("T_target_source.txt", "result.json"))
@@ -129,6 +156,30 @@ def _poses(path: Path) -> dict[str, np.ndarray]:
     return read_pose_list(path) if path.exists() else {}
 
 
+def _statuses(result_dir: Path, poses: dict[str, np.ndarray]) -> dict[str, str]:
+    """Every scan's status (poses.csv; a result without it: the scans of poses.txt, ok)."""
+    table = result_dir / "poses.csv"
+    if not table.exists():
+        return dict.fromkeys(poses, "ok")
+    check_unchanged(result_dir, ("poses.csv",))
+    rows = read_table(table, "poses", ("file", "status"))
+    out = {}
+    for r in rows:
+        status, cluster = r["status"] or "unposed", r.get("cluster") or "0"
+        out[r["file"]] = f"{status} in cluster {cluster}" if cluster != "0" else status
+    return out
+
+
+def _anchor(result_dir: Path, names: list[str]) -> str | None:
+    """The anchor's name: summary.json's ``anchor`` index into the scans (the first scan of a
+    result without it)."""
+    summary = result_dir / "summary.json"
+    index = read_json_object(summary, "summary").get("anchor", 0) if summary.exists() else 0
+    if not isinstance(index, int) or not 0 <= index < max(len(names), 1):
+        raise InputError("'anchor' is not the index of a scan", summary)
+    return names[index] if names else None
+
+
 def _drift(est: dict[str, np.ndarray], ref: dict[str, np.ndarray]) -> dict[str, Any] | None:
     """Error of the last scan in the frame of the first (both named in the reference)."""
     named = [n for n in est if n in ref]
@@ -144,12 +195,23 @@ def _drift(est: dict[str, np.ndarray], ref: dict[str, np.ndarray]) -> dict[str, 
 Thresholds = tuple[tuple[float, float], ...]
 
 
-def compare_with_reference(
-    result_dir: str | Path, reference: str | Path, thresholds: Thresholds = DEFAULT_THRESHOLDS
-) -> Evaluation:
-    """Compare every link (and the chained poses) of ``result_dir`` with ``reference``."""
-    results = _read_results(Path(result_dir))
-    ref_poses, ref_pairs = read_reference(reference)
+def _rates(rows: list[dict[str, Any]], thresholds: Thresholds) -> list[dict[str, Any]]:
+    """Per threshold, the share of rows within it (a row without errors fails)."""
+    out = []
+    for r, t in thresholds:
+        ok = [
+            x["rotation_error_deg"] is not None
+            and x["rotation_error_deg"] <= r
+            and x["translation_error_m"] <= t
+            for x in rows
+        ]
+        rate = float(np.mean(ok)) if ok else None
+        out.append({"max_rotation_deg": r, "max_translation_m": t, "success_rate": rate})
+    return out
+
+
+def _link_rows(results: _Results, ref_poses: dict, ref_pairs: dict) -> list[dict[str, Any]]:
+    """The error of every link the reference covers, with its network state."""
     rows = []
     for target, source, T, state in results.links:
         if (target, source) in ref_pairs:
@@ -164,15 +226,62 @@ def compare_with_reference(
         if state:
             row["network"] = state
         rows.append(row)
-    if not rows:
+    return rows
+
+
+def _base(results: _Results, ref: dict[str, np.ndarray]) -> str | None:
+    """The scan the poses are compared relative to: the anchor, or (the reference lacks it)
+    the first scan both give a pose; None when they share none."""
+    est = results.poses
+    if results.anchor in ref and results.anchor in est:
+        return results.anchor
+    return next((n for n in results.statuses if n in ref and n in est), None)
+
+
+def _scan_rows(results: _Results, ref: dict[str, np.ndarray], base: str | None) -> list:
+    """Per scan of both: its status and its pose error relative to ``base`` (None: no ok pose
+    in the anchor's frame)."""
+    est = results.poses
+    rows = []
+    for name, status in results.statuses.items():
+        if name not in ref:
+            continue
+        row: dict[str, Any] = {"scan": name, "status": status}
+        row["rotation_error_deg"] = row["translation_error_m"] = None
+        if base is not None and name in est:
+            T_est = np.linalg.inv(est[base]) @ est[name]
+            T_ref = np.linalg.inv(ref[base]) @ ref[name]
+            rot, trans = transform_errors(T_est, T_ref)
+            row["rotation_error_deg"], row["translation_error_m"] = rot, trans
+        rows.append(row)
+    return rows
+
+
+def compare_with_reference(
+    result_dir: str | Path, reference: str | Path, thresholds: Thresholds = DEFAULT_THRESHOLDS
+) -> Evaluation:
+    """Compare every link and every scan of ``result_dir`` with ``reference`` (see the module
+    docstring)."""
+    results = _read_results(Path(result_dir))
+    ref_poses, ref_pairs = read_reference(reference)
+    rows = _link_rows(results, ref_poses, ref_pairs)
+    base = _base(results, ref_poses)
+    scans = _scan_rows(results, ref_poses, base)
+    if not rows and not scans:
         raise InputError(
-            "no link of the results has a reference pose (check the scan names)", reference
+            "no link or scan of the results has a reference pose (check the scan names)",
+            reference,
         )
-    success = []
-    for r, t in thresholds:
-        ok = [x["rotation_error_deg"] <= r and x["translation_error_m"] <= t for x in rows]
-        success.append(
-            {"max_rotation_deg": r, "max_translation_m": t, "success_rate": float(np.mean(ok))}
-        )
+    judged = [x for x in rows if x.get("network", KEPT[0]) in KEPT]
     drift, chained = _drift(results.poses, ref_poses), _drift(results.chained, ref_poses)
-    return Evaluation(rows, success, drift, chained if results.chained else None)
+    named = set(results.statuses) | {n for t, s, _, _ in results.links for n in (t, s)}
+    return Evaluation(
+        rows,
+        _rates(judged, thresholds),
+        drift,
+        chained if results.chained else None,
+        scans,
+        _rates(scans, thresholds) if scans else [],
+        sorted(n for n in ref_poses if n not in named),
+        base,
+    )

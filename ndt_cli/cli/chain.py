@@ -178,7 +178,6 @@ def _run(inputs: ChainInputs, cfg: Config, opts: _Options) -> tuple[ChainResult,
     from ndt_cli.cli.progress import ChainProgress
     from ndt_cli.pipeline.chain import run_chain
     from ndt_cli.pipeline.executors import make_executor
-    from ndt_cli.pipeline.inputs import expected_links
     from ndt_cli.report.chain_outputs import write_chain_outputs
     from ndt_cli.report.reasons import with_named_reasons
 
@@ -186,8 +185,7 @@ def _run(inputs: ChainInputs, cfg: Config, opts: _Options) -> tuple[ChainResult,
     pool = make_executor(opts.executor, opts.jobs, opts.scheduler)
     try:  # closed whatever stops the run (run_chain closes it too)
         pool.start()  # before this process starts threads of its own
-        total = expected_links(len(inputs.paths), inputs.network)
-        with ChainProgress(inputs.names, total, enabled=opts.progress) as advance:
+        with ChainProgress(inputs.names, enabled=opts.progress) as progress:
             result = run_chain(
                 inputs.paths,
                 cfg,
@@ -196,22 +194,24 @@ def _run(inputs: ChainInputs, cfg: Config, opts: _Options) -> tuple[ChainResult,
                 resume=opts.resume,
                 anchor=inputs.anchor,
                 network=inputs.network,
-                on_progress=advance,
+                on_progress=progress.link_done,
             )
+            progress.stage("writing the outputs")
+            runtime = time.perf_counter() - t0
+            result = with_named_reasons(result)
+            write_chain_outputs(opts.out, result, cfg, runtime, command_line())
     finally:
         pool.close()
-    runtime = time.perf_counter() - t0
-    result = with_named_reasons(result)
-    write_chain_outputs(opts.out, result, cfg, runtime, command_line())
     return result, runtime
 
 
 def _show(result: ChainResult, runtime: float, out: Path, json_out: bool, quiet: bool) -> None:
     if json_out:
         from ndt_cli.io.serialize import to_json
-        from ndt_cli.report.chain_outputs import summary
+        from ndt_cli.report.chain_outputs import pose_records, summary
 
-        typer.echo(to_json(summary(result, runtime)), nl=False)
+        record = {**summary(result, runtime), "poses": pose_records(result)}
+        typer.echo(to_json(record), nl=False)
     elif not quiet:
         from ndt_cli.report.console import print_chain_summary
 

@@ -25,10 +25,15 @@ eval_app = new_app()
 
 _HELP = "\n\n".join(
     [
-        "Rotation (deg) and translation (m) error of every link of an ndt-chain or ndt-register "
-        "result against reference poses, the success rates at 2 deg / 10 cm and 0.1 deg / 2 cm, "
-        "and the end-of-chain drift. The result folder is only read; --out writes eval.csv and "
-        "eval.json into a folder of their own.",
+        "Errors of an ndt-chain or ndt-register result against reference poses: per link its "
+        "T_target_source, per scan its pose relative to the anchor (so that any world frame "
+        "compares), as rotation (degrees) and translation (printed in centimetres; metres in "
+        "eval.csv, eval_scans.csv and the JSON). Success rates at 2 deg / 10 cm and 0.1 deg / "
+        "2 cm judge the links the network kept (confirmed, used) and every scan of the "
+        "reference in the result: a scan without an ok pose in the anchor's frame (unposed, "
+        "suspect, another cluster) fails. The reference's scans the result lacks are named; "
+        "the end-of-chain drift follows. The result folder is only read; --out writes "
+        "eval.csv, eval_scans.csv and eval.json into a folder of their own.",
         "Exit codes: 0 success; 2 bad input (no result folder, a reference that names no scan "
         "of the result, a bad reference line) or an unwritable --out.",
         "Example:\n\n  ndt-eval street/ --gt poses_T_world_scan.txt --out street_eval/",
@@ -48,7 +53,9 @@ def evaluate_cmd(
     ] = None,
     out: Annotated[
         Path | None,
-        typer.Option("--out", "-o", help="Write eval.csv and eval.json into this folder."),
+        typer.Option(
+            "--out", "-o", help="Write eval.csv, eval_scans.csv and eval.json into this folder."
+        ),
     ] = None,
     json_out: JsonOpt = False,
     quiet: QuietOpt = False,
@@ -84,4 +91,12 @@ def _publish(ev: object, out: Path) -> None:
     columns = ["target", "source", "rotation_error_deg", "translation_error_m"]
     if any("network" in row for row in ev.links):  # links of a chain carry the network's verdict
         columns.append("network")
-    publish(out, {"eval.csv": csv_text(ev.links, columns), "eval.json": to_json(ev.to_dict())})
+    scans = ["scan", "status", "rotation_error_deg", "translation_error_m"]
+    publish(
+        out,
+        {
+            "eval.csv": csv_text(ev.links, columns),
+            "eval_scans.csv": csv_text(ev.scans, scans),
+            "eval.json": to_json(ev.to_dict()),
+        },
+    )

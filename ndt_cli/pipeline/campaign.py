@@ -62,7 +62,7 @@ from ndt_cli.pipeline.network import (
     pair_of,
     plan_near,
 )
-from ndt_cli.pipeline.result import ChainResult, ScanReport, scan_report
+from ndt_cli.pipeline.result import ChainResult, Dropped, ScanReport, TriedLink, scan_report
 from ndt_cli.pipeline.scans import DuplicateScanError, file_hash, scan_names
 from ndt_cli.pipeline.solution import NetworkSolution, solve
 
@@ -195,6 +195,8 @@ class Campaign:
             radius=self.radius,
             hashes=tuple(None if h.startswith(UNREADABLE) else h for h in self.hashes),
             **self._world_system(solution),
+            tried=self._tried(links),
+            samples={i: s.sample for i, s in sorted(self.summaries.items()) if s.sample},
         )
 
     def _anchor(self, names: Sequence[str]) -> int:
@@ -212,6 +214,22 @@ class Campaign:
             names[readable[0]],
         )
         return readable[0]
+
+    def _tried(self, links: Sequence[Link]) -> tuple[TriedLink, ...]:
+        """The registrations run that are not links of the network, indexed after them, in
+        the order of their scans: why each is left out."""
+        network = {k.key for k in links}
+        pairs = {pair_of(k.target, k.source) for k in links}
+        others = [k for k in self.tasks.tried if k.key not in network]
+        others.sort(key=lambda k: (*pair_of(k.target, k.source), k.target))
+        user, out = {k.pair for k in self.net.pairs}, []
+        for n, k in enumerate(others):
+            pair = pair_of(k.target, k.source)
+            why = Dropped.OTHER_WAY if pair in pairs else Dropped.NOT_PLANNED
+            out.append(
+                TriedLink(replace(k, index=len(links) + n, kind=self._kind(pair, user)), why)
+            )
+        return tuple(out)
 
     def _world_system(self, solution: NetworkSolution) -> dict[str, Any]:
         """The control's stations and coordinate system, and the grid scale when applied."""

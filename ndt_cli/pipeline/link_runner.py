@@ -61,6 +61,7 @@ class LinkRunner:
         self.prepared: OrderedDict[int, PreparedScan] = OrderedDict()
         self.unreadable: dict[int, str] = {}
         self.links: dict[Pair, Link] = {}
+        self.tried: list[Link] = []  # every finished registration, the better way round or not
         self.finished: set[str] = set()  # keys of the links registered (or taken) so far
         self.reused: set[str] = set()  # keys of the links taken from the store
 
@@ -115,7 +116,9 @@ class LinkRunner:
         todo = [j for j in todo if j.key not in self.finished]
         if not todo:
             return
-        progress.info("registering %d link(s)", len(todo))
+        # the pairs ride on the record, for a display that names the links at work
+        pairs = tuple((j.target, j.source) for j in todo)
+        progress.info("registering %d link(s)", len(todo), extra={"links": pairs})
         ships = self.executor.ships_data
         need = {s for j in todo for s in (j.target, j.source)}
         self.run(sorted(s for s in need if ships and s not in self.prepared), todo)
@@ -172,11 +175,12 @@ class LinkRunner:
             self.prepared[i] = value.prepared
         if i not in self.summaries:
             self.summaries[i] = replace(value, prepared=None)
-            self.store.save_scan(self.scan_key(i), value.preview, value.sketch)
+            self.store.save_scan(self.scan_key(i), value.preview, value.sketch, value.sample)
 
     def _finish(self, job: LinkJob, link: Link, save: bool = True) -> None:
         """Keep a finished link (the better of two ways round, see :meth:`register`)."""
         self.finished.add(job.key)
+        self.tried.append(link)
         kept = self.links.get(job.pair)
         if kept is None or _rank(link) < _rank(kept):
             self.links[job.pair] = link

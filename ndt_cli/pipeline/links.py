@@ -4,8 +4,9 @@ A link is known by the key of its inputs: both scans' contents (file hashes), wh
 target, and the config. Every finished link is written at once to ``links/<key>.json``
 (atomically), so an interrupted campaign resumes where it stopped, and a campaign whose scans
 were renamed, reordered or joined by more scans finds every link it already registered. What
-the campaign needs of each scan without reading it again (its sketch for the overlap search
-and its preview for the top view) is kept there too, under the key of the scan.
+the campaign needs of each scan without reading it again (its sketch for the overlap search,
+its preview for the top view and its slice sample for the report) is kept there too, under the
+key of the scan.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from ndt_cli.ndt.bnb import ScoreField
 from ndt_cli.ndt.overlap import Sketch
 from ndt_cli.ndt.result import RegistrationResult, Status
 from ndt_cli.pipeline.network import LinkKind
+from ndt_cli.pipeline.samples import SliceSample
 
 log = logging.getLogger(__name__)
 
@@ -155,9 +157,11 @@ class LinkStore:
             return None
         return link if link.key == key else None
 
-    def save_scan(self, scan_key: str, preview: np.ndarray, sketch: Sketch) -> None:
-        """Keep what the campaign needs of a scan without reading it again, with the digest
-        of its arrays."""
+    def save_scan(
+        self, scan_key: str, preview: np.ndarray, sketch: Sketch, sample: SliceSample | None
+    ) -> None:
+        """Keep what the campaign needs of a scan without reading it again (its preview, its
+        sketch, the slices the link inspector draws), with the digest of its arrays."""
         field = sketch.field
         arrays = {
             "preview": preview,
@@ -168,13 +172,16 @@ class LinkStore:
             "to_local": sketch.to_local,
             **{f"slice_{k}": s for k, s in enumerate(sketch.slices)},
         }
+        if sample is not None:
+            arrays |= {f"inspect_{k}": s for k, s in enumerate(sample.slices)}
+            arrays |= {"inspect_heights": np.array(sample.heights, dtype=float)}
         arrays = {name: np.asarray(a) for name, a in arrays.items()}
         with atomic.atomic_open(self._scan_path(scan_key), "wb") as fh:
             np.savez(fh, **arrays, **{DIGEST: np.array(_array_digest(arrays))})
 
-    def load_scan(self, scan_key: str) -> tuple[np.ndarray, Sketch] | None:
-        """A scan's preview and sketch, if kept (and unchanged since: else None, and the scan
-        is read again)."""
+    def load_scan(self, scan_key: str) -> tuple[np.ndarray, Sketch, SliceSample | None] | None:
+        """A scan's preview, sketch and slice sample (None when an older run kept none), if
+        kept (and unchanged since: else None, and the scan is read again)."""
         path = self._scan_path(scan_key)
         try:
             with np.load(path) as z:
@@ -193,12 +200,22 @@ class LinkStore:
             slices = tuple(arrays[f"slice_{k}"] for k in range(n))
             f = arrays
             field = ScoreField(f["field"], f["origin"], float(f["resolution"]), f["centre"])
-            return f["preview"], Sketch(slices, field, f["to_local"])
+            sketch = Sketch(slices, field, f["to_local"])
+            return f["preview"], sketch, _sample(arrays, sketch)
         except (KeyError, TypeError, ValueError):
             return None
 
     def _scan_path(self, scan_key: str) -> Path:
         return self.folder / f"scan_{scan_key[:40]}.npz"
+
+
+def _sample(arrays: dict[str, np.ndarray], sketch: Sketch) -> SliceSample | None:
+    """The slices kept for the link inspector (None: an older run kept none)."""
+    if "inspect_heights" not in arrays:
+        return None
+    heights = tuple(float(h) for h in arrays["inspect_heights"])
+    cut = tuple(arrays[f"inspect_{k}"] for k in range(len(heights)))
+    return SliceSample(sketch.to_local, heights, cut)
 
 
 def _untrusted(path: Path, digest: str | None, what: str) -> None:

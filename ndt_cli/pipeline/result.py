@@ -5,6 +5,7 @@ builds it)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
@@ -12,8 +13,32 @@ import numpy as np
 from ndt_cli.pipeline.control import Station
 from ndt_cli.pipeline.datum import not_georeferenced
 from ndt_cli.pipeline.links import Link
+from ndt_cli.pipeline.samples import SliceSample
 from ndt_cli.pipeline.solution import NetworkSolution
 from ndt_cli.pipeline.verify import EdgeState, NodeStatus
+
+
+class Dropped(StrEnum):
+    """Why a registration tried is not a link of the network: its pair is not in the network
+    planned from where the scans are (it was tried while placing a scan), or the same pair was
+    registered the other way round too and that one was kept (it ranked better)."""
+
+    NOT_PLANNED = "not_planned"
+    OTHER_WAY = "other_way_kept"
+
+    @property
+    def reason(self) -> str:
+        if self is Dropped.NOT_PLANNED:
+            return "tried while placing a scan; not among the pairs the network was planned from"
+        return "the same pair registered the other way round is the link kept (it ranked better)"
+
+
+@dataclass(frozen=True)
+class TriedLink:
+    """A registration the campaign ran that is not a link of its network, and why."""
+
+    link: Link
+    why: Dropped
 
 
 @dataclass(frozen=True)
@@ -34,6 +59,8 @@ class ChainResult:
     stations: tuple[Station, ...] = ()  # the control file's stations (none without control)
     hashes: tuple[str | None, ...] = ()  # SHA-256 of each scan's file when it was admitted
     # (what was registered; None: it could not be read); empty: not known
+    tried: tuple[TriedLink, ...] = ()  # registrations run that are not links of the network
+    samples: dict[int, SliceSample] | None = None  # two slices per scan, for the inspector
 
     @property
     def poses(self) -> tuple[np.ndarray | None, ...]:

@@ -21,6 +21,7 @@ from ndt_cli.ndt.prepare import PreparedScan, load_and_prepare
 from ndt_cli.ndt.register import register_prepared
 from ndt_cli.pipeline.links import Link
 from ndt_cli.pipeline.network import LinkKind
+from ndt_cli.pipeline.samples import SliceSample, slice_sample
 from ndt_cli.pipeline.workers import Failure
 
 
@@ -89,11 +90,13 @@ def prepare_scan(path: Path, cfg: Config) -> PreparedScan | Failure:
 @dataclass(frozen=True)
 class ScanSummary:
     """What a campaign keeps of a scan: its preview points (x, y, z, scan frame) for the top
-    view, its sketch for the overlap search and, where tasks are shipped their scans, the
-    prepared scan itself."""
+    view, its sketch for the overlap search, two of its slices for the report's link inspector
+    (None: kept by an older run) and, where tasks are shipped their scans, the prepared scan
+    itself."""
 
     preview: np.ndarray
     sketch: Sketch
+    sample: SliceSample | None = None
     prepared: PreparedScan | None = None
 
 
@@ -103,7 +106,8 @@ def summarise_scan(path: Path, cfg: Config, ship: bool) -> ScanSummary | Failure
     value = prepare_scan(path, cfg)
     if isinstance(value, Failure):
         return value
-    return ScanSummary(value.preview(), sketch(value), value if ship else None)
+    sample = slice_sample(value, cfg.slices.heights)
+    return ScanSummary(value.preview(), sketch(value), sample, value if ship else None)
 
 
 def register_link(job: LinkJob, target: PreparedScan, source: PreparedScan, cfg: Config) -> Link:

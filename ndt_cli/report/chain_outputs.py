@@ -17,6 +17,7 @@ from ndt_cli.io.names import link_file_names, pose_file_names
 from ndt_cli.io.outdir import publish
 from ndt_cli.io.serialize import csv_text, to_json
 from ndt_cli.ndt.result import Status
+from ndt_cli.pipeline.links import Link
 from ndt_cli.pipeline.result import ChainResult
 from ndt_cli.pipeline.scans import file_hash
 from ndt_cli.pipeline.solution import ScanPose
@@ -59,6 +60,7 @@ def summary(result: ChainResult, runtime_s: float) -> dict[str, Any]:
                 for k, f in zip(result.links, sol.links, strict=True)
                 if f.state is EdgeState.REJECTED
             ],
+            "left_out": _count(t.why.value for t in result.tried),
             "scans_by_status": _count(s.value for s in scans),
             "clusters": _count(str(s.cluster) for s in sol.scans if s.cluster is not None),
             "scans_not_ok": {
@@ -70,6 +72,31 @@ def summary(result: ChainResult, runtime_s: float) -> dict[str, Any]:
         },
         "world": world_summary(result),
     }
+
+
+def pose_records(result: ChainResult) -> list[dict[str, Any]]:
+    """Every scan as ``ndt-chain --json`` gives it: name, status, cluster, ``T_world_scan``
+    (4x4 rows, metres; a scan of cluster K > 0 in its cluster's frame; None when unposed),
+    its 1-sigma (x, y, z in cm and yaw in degrees, world axes; None without an adjustment)
+    and why it is not ok (as ``poses.csv``)."""
+    out = []
+    for name, s in zip(result.names, result.solution.scans, strict=True):
+        sigma = None
+        if s.sigma is not None:
+            x, y, z, yaw = (float(v) for v in s.sigma)
+            sigma = {"x_cm": 100 * x, "y_cm": 100 * y, "z_cm": 100 * z, "yaw_deg": yaw}
+        T = None if s.T_world_scan is None else s.T_world_scan.tolist()
+        out.append(
+            {
+                "scan": name,
+                "status": s.status.value,
+                "cluster": s.cluster,
+                "T_world_scan": T,
+                "sigma": sigma,
+                "reason": s.reason,
+            }
+        )
+    return out
 
 
 def _count(values: Any) -> dict[str, int]:
@@ -152,13 +179,18 @@ def pose_files(result: ChainResult) -> dict[str, str]:
     return {n: format_matrix(s.T_world_scan) for n, s in zip(names, scans, strict=True) if n}
 
 
+def every_link(result: ChainResult) -> list[Link]:
+    """The rows of ``pairs.csv``: the network's links, then the registrations tried and left
+    out of it."""
+    return [*result.links, *(t.link for t in result.tried)]
+
+
 def link_file_list(result: ChainResult) -> list[str]:
-    """The ``T_<target>_<source>.txt`` file of every link ('' for a link without a transform;
-    names: :func:`link_file_names`)."""
-    names = link_file_names(result.names, [(k.target, k.source) for k in result.links])
-    return [
-        n if k.T_target_source is not None else "" for n, k in zip(names, result.links, strict=True)
-    ]
+    """The ``T_<target>_<source>.txt`` file of every row of ``pairs.csv`` ('' for a link
+    without a transform; names: :func:`link_file_names`)."""
+    links = every_link(result)
+    names = link_file_names(result.names, [(k.target, k.source) for k in links])
+    return [n if k.T_target_source is not None else "" for n, k in zip(names, links, strict=True)]
 
 
 def _header_poses_text(result: ChainResult) -> str | None:
@@ -190,6 +222,7 @@ def chain_files(result: ChainResult, cfg: Config, runtime_s: float) -> dict[str,
     """Every text output of a chain, by file name."""
     names, sol, transforms = result.names, result.solution, link_file_list(result)
     pairs = [pair_row(k, names, f) for k, f in zip(result.links, sol.links, strict=True)]
+    pairs += [pair_row(t.link, names, left_out=t.why) for t in result.tried]
     level = _levels(result)
     poses = [
         pose_row(k, n, s.T_world_scan, s, level.get(k))
@@ -203,7 +236,7 @@ def chain_files(result: ChainResult, cfg: Config, runtime_s: float) -> dict[str,
         **cluster_poses_files(result),
         **pose_files(result),
     }
-    for link, name in zip(result.links, transforms, strict=True):
+    for link, name in zip(every_link(result), transforms, strict=True):
         if name:
             files[name] = format_matrix(link.T_target_source)
     header = _header_poses_text(result)

@@ -1,13 +1,14 @@
-"""Summaries printed on the terminal (rich tables)."""
+"""Summaries printed on the terminal (rich tables): a registration, a campaign
+(:mod:`ndt_cli.report.console_chain`), an evaluation."""
 
 from __future__ import annotations
 
 from typing import Any
 
 from ndt_cli.ndt.result import RegistrationResult
-from ndt_cli.pipeline.result import ChainResult
-from ndt_cli.pipeline.verify import EdgeState, NodeStatus
-from ndt_cli.report.tables import pair_row
+from ndt_cli.report.console_chain import print_chain_summary
+
+__all__ = ["print_chain_summary", "print_evaluation", "print_summary"]
 
 
 def print_summary(result: RegistrationResult, console: Any) -> None:
@@ -45,84 +46,74 @@ def print_summary(result: RegistrationResult, console: Any) -> None:
     console.print(levels)
 
 
-def print_chain_summary(result: ChainResult, console: Any) -> None:
-    """A rich table with one row per link, and one per scan that is not ok."""
-    from rich.table import Table
-
-    columns = ("link", "kind", "target", "source", "tx (m)", "ty (m)", "yaw (deg)", "score/pt")
-    table = Table(*columns, "status", "network", "residual (cm)", title="ndt-chain links")
-    sol = result.solution
-    for link, fit in zip(result.links, sol.links, strict=True):
-        row = pair_row(link, result.names, fit)
-        status = link.status.value if not link.reason else f"{link.status.value}: {link.reason}"
-        table.add_row(
-            str(link.index),
-            link.kind.value,
-            row["target"],
-            row["source"],
-            row["tx"][:9],
-            row["ty"][:9],
-            row["yaw_deg"][:9],
-            row["score_per_point"][:6],
-            status,
-            row["network"] + (f": {fit.reason}" if fit.state is EdgeState.REJECTED else ""),
-            row["residual_cm"],
+def _rates(label: str, success: list, n: int, console: Any) -> None:
+    """One line per threshold: the share within it, of ``n``."""
+    for s in success:
+        if s["success_rate"] is None:
+            continue
+        within = round(s["success_rate"] * n)
+        console.print(
+            f"{label} within {s['max_rotation_deg']:g} deg / {100 * s['max_translation_m']:g} cm: "
+            f"{100 * s['success_rate']:.0f} % ({within} of {n})",
+            soft_wrap=False,
+            markup=False,
         )
-    console.print(table)
-    bad = [(k, s) for k, s in enumerate(sol.scans) if s.status is not NodeStatus.OK]
-    if bad:
-        scans = Table("scan", "status", "reason", title="scans that are not ok")
-        for k, s in bad:
-            scans.add_row(result.names[k], s.status.value, s.reason)
-        console.print(scans)
-    _print_controls(result, console)
-    n_ok = len(sol.scans) - len(bad)
-    georeferenced = "; NOT GEOREFERENCED (see above)" if result.not_georeferenced else ""
-    adjusted = " (adjusted)" if sol.adjusted else ""
-    console.print(f"{n_ok} of {len(sol.scans)} scans ok{adjusted}{georeferenced}")
 
 
-def _print_controls(result: Any, console: Any) -> None:
-    """The control stations: given and adjusted coordinates, residual (cm), used or not."""
-    from rich.table import Table
+_WORDS = {"used": "not checked", "unused": "not used"}  # the network states, as the report says
 
-    from ndt_cli.report.world import world_line, world_summary
 
-    rows = world_summary(result)["controls"]
-    if rows:
-        table = Table("scan", "given x y z (m)", "residual E N h (cm)", "used", title="control")
-        for r in rows:
-            res = r["residual_cm"]
-            table.add_row(
-                r["scan"],
-                " ".join(f"{v:.3f}" for v in r["given"]),
-                "" if res is None else " ".join(f"{v:+.1f}" for v in res),
-                "yes" if r["used"] else f"no: {r['reason']}",
-            )
-        console.print(table)
-    console.print(world_line(result), soft_wrap=False)  # long: wrapped at words
+def _deg_cm(row: dict) -> tuple[str, str]:
+    rot, trans = row["rotation_error_deg"], row["translation_error_m"]
+    if rot is None:
+        return "", ""
+    return f"{rot:.4f}", f"{100 * trans:.2f}"
 
 
 def print_evaluation(ev: Any, console: Any) -> None:
-    """Per-link errors, success rates and the end-of-chain drift of an evaluation."""
-    from rich.table import Table
+    """Per-link and per-scan errors, their success rates, the scans the result lacks and the
+    end-of-chain drift of an evaluation (errors in degrees and centimetres)."""
+    from ndt_cli.analysis.accuracy import KEPT
+    from ndt_cli.report.console_fit import Col, print_fitted, styled
 
-    network = any("network" in row for row in ev.links)
-    columns = ["target", "source", "rotation error (deg)", "translation error (cm)"]
-    table = Table(*columns, *(["network"] if network else []), title="ndt-eval")
-    for row in ev.links:
-        cells = [row["target"], row["source"], f"{row['rotation_error_deg']:.4f}"]
-        cells.append(f"{100 * row['translation_error_m']:.2f}")
-        table.add_row(*cells, *([row.get("network", "")] if network else []))
-    console.print(table)
-    for s in ev.success:
+    links = ev.links
+    errors = [_deg_cm(r) for r in links]
+    cols = [Col("target <- source", [f"{r['target']} <- {r['source']}" for r in links])]
+    if any("network" in r for r in links):
+        words = [_WORDS.get(r.get("network", ""), r.get("network", "")) for r in links]
+        cols.append(Col("network", [styled(w) for w in words]))
+    cols += [
+        Col("rotation\nerror (deg)", [e[0] for e in errors], justify="right"),
+        Col("translation\nerror (cm)", [e[1] for e in errors], justify="right"),
+    ]
+    if links:
+        print_fitted(console, [cols], "ndt-eval: links")
+    judged = [r for r in links if r.get("network", KEPT[0]) in KEPT]
+    _rates("kept links", ev.success, len(judged), console)
+    if len(judged) < len(links):
+        left = len(links) - len(judged)
+        console.print(f"{left} link(s) not kept by the network: not judged", soft_wrap=False)
+    if ev.scans:
+        errors = [_deg_cm(r) for r in ev.scans]
+        scans = [
+            Col("scan", [r["scan"] for r in ev.scans]),
+            Col("status", [styled(r["status"]) for r in ev.scans]),
+            Col("rotation\nerror (deg)", [e[0] for e in errors], justify="right"),
+            Col("translation\nerror (cm)", [e[1] for e in errors], justify="right"),
+        ]
+        print_fitted(console, [scans], f"ndt-eval: scans, relative to {ev.anchor}")
+        _rates("scans ok and", ev.scan_success, len(ev.scans), console)
+    if ev.missing:
         console.print(
-            f"success at {s['max_rotation_deg']:g} deg / {100 * s['max_translation_m']:g} cm: "
-            f"{100 * s['success_rate']:.0f} %"
+            f"the result lacks {len(ev.missing)} scan(s) of the reference: {', '.join(ev.missing)}",
+            soft_wrap=False,
+            markup=False,
         )
     for label, d in (("end-of-chain drift", ev.drift), ("chained, not adjusted", ev.drift_chained)):
         if d:
             console.print(
                 f"{label} ({d['to']} in the frame of {d['from']}): "
-                f"{d['rotation_error_deg']:.4f} deg, {100 * d['translation_error_m']:.2f} cm"
+                f"{d['rotation_error_deg']:.4f} deg, {100 * d['translation_error_m']:.2f} cm",
+                soft_wrap=False,
+                markup=False,
             )

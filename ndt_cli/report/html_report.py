@@ -1,9 +1,8 @@
 """``report.html`` of a run: the registration report a client reads, filled from the results.
 
-One self-contained file (:mod:`ndt_cli.report.html`): summary and verdict, a table of scans
-(status, pose, uncertainty), a table of links (kind, status, fit, residual after the
-adjustment, warnings), the top view and the configuration used. Here: a pair's report and the
-header every report shares; a campaign's is :mod:`ndt_cli.report.html_chain`.
+One self-contained file (:mod:`ndt_cli.report.html`). Here: a pair's report (its verdict, the
+two scans, the link with its fit and strength, the configuration) and the header every report
+shares; a campaign's is :mod:`ndt_cli.report.html_chain`.
 """
 
 from __future__ import annotations
@@ -33,6 +32,8 @@ def finite(v: float) -> float | None:
 def register_report(result: RegistrationResult, config_yaml: str, command: str = "") -> str:
     """The HTML report of an ``ndt-register`` run (the target's frame is the world);
     ``command``: the command line that ran it ('' for a library call: not shown)."""
+    from ndt_cli.report.network_numbers import link_strength
+
     T = result.T_target_source
     reason = "; ".join(result.warnings)
     target, source = result.labels
@@ -50,6 +51,7 @@ def register_report(result: RegistrationResult, config_yaml: str, command: str =
         ambiguity=result.ambiguity,
         icp_rms_cm=finite(100 * result.icp_rms),
         warnings=result.warnings,
+        strength_mm=link_strength(result).as_mm(),
     )
     verdict = Verdict(result.ok, "" if result.ok else f"{result.status.value}")
     summary = (("status", result.status.value), ("run time", f"{result.runtime_s:.1f} s"))

@@ -1,6 +1,8 @@
 """A plan view of scans and links as a PNG: world metres to pixels at one scale in x and y
-(y up), a grid in world metres, each scan's points in its colour, links coloured by a value,
-scanner markers, labels, a colour bar and a legend.
+(y up), a grid in world metres counted from a stated origin (so that georeferenced coordinates
+read ``120``, not ``5.8001e+06``), each scan's points in its colour, links drawn by their state
+(checked ones coloured by their residual), scanner and control station markers, labels, a
+colour bar and a legend.
 
 Drawn with Pillow rather than a plotting library: loading matplotlib and drawing the points took
 about a second at the end of a chain, this takes a tenth of that. Everything is drawn at
@@ -31,7 +33,8 @@ TAB10 += ("8c564b", "e377c2", "7f7f7f", "bcbd22", "17becf")
 VIRIDIS = ("440154", "482878", "3e4989", "31688e", "26828e")  # viridis: 10 stops, 0 to 1
 VIRIDIS += ("1f9e89", "35b779", "6ece58", "b5de2b", "fde725")
 GRID, INK, REJECTED, UNUSED, SUSPECT = "#dddddd", "#000000", "#d62728", "#888888", "#ff8c00"
-OK_LINK = "#2ca02c"
+UNCHECKED = "#3b5b82"  # a kept link that no cycle checks: dashed slate blue, never green
+STATION = "#1b7a32"  # a control station used (a rejected one is red)
 
 
 def rgb(hex6: str) -> tuple[int, int, int]:
@@ -62,12 +65,12 @@ class Scan:
 
 
 class EdgeStyle(StrEnum):
-    """How a link is drawn: coloured by its residual, green (kept, no residual), grey (failed)
-    or red and dashed (rejected)."""
+    """How a link is drawn: checked by a cycle (solid, coloured by its residual), kept but not
+    checked (dashed slate blue), rejected (dashed red) or not used (thin grey)."""
 
     RESIDUAL = "residual"
-    OK = "ok"
-    FAILED = "failed"
+    UNCHECKED = "unchecked"
+    UNUSED = "unused"
     REJECTED = "rejected"
 
 
@@ -81,14 +84,29 @@ class Edge:
     residual_cm: float = 0.0
 
 
+XY = tuple[float, float]  # world (x, y), m
+
+
+@dataclass(frozen=True)
+class Station:
+    """A control station at its given coordinates (world m), used by the adjustment or not."""
+
+    name: str
+    xy: np.ndarray
+    used: bool
+
+
 @dataclass(frozen=True)
 class Scene:
-    """What the top view shows; ``top_cm``: the residual drawn yellow (None: no colour bar)."""
+    """What the top view shows; ``top_cm``: the residual drawn yellow (None: no colour bar);
+    ``origin``: world (x, y) m the axes count from."""
 
     scans: tuple[Scan, ...]
     edges: tuple[Edge, ...]
     top_cm: float | None
     title: tuple[str, ...]
+    origin: XY = (0.0, 0.0)
+    stations: tuple[Station, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -120,6 +138,7 @@ def view_of(scene: Scene, ss: int = 1) -> View:
     :data:`PLOT_MAX` and the data fills it at one scale; sizes times ``ss``."""
     xy = [s.points for s in scene.scans if s.points is not None]
     xy += [s.position[None] for s in scene.scans if s.position is not None]
+    xy += [s.xy[None] for s in scene.stations]
     every = np.concatenate(xy) if xy else np.zeros((1, 2))
     lo, hi = column_bounds(every)
     span = np.maximum(hi - lo, 1.0) * 1.04  # 2 % free on every side
@@ -144,8 +163,22 @@ def nice_step(span: float, ticks: int = 6) -> float:
 
 
 def tick_label(metres: float) -> str:
-    """A grid coordinate as text: ``-50``, ``0`` (never ``-0``), ``2.5``."""
-    return f"{float(metres) + 0.0:g}"
+    """A grid coordinate as text: ``-50``, ``0`` (never ``-0``), ``2.5``, ``12000`` (never
+    in exponent notation)."""
+    text = f"{float(metres) + 0.0:.3f}".rstrip("0").rstrip(".")
+    return "0" if text == "-0" else text
+
+
+GEOREFERENCED_M = 10_000.0  # coordinates beyond this count from a round origin
+
+
+def origin_of(xy: np.ndarray) -> XY:
+    """The origin the axes count from: (0, 0), or the centre of the points rounded to 100 m
+    when they lie farther than :data:`GEOREFERENCED_M` from it (map coordinates)."""
+    if not len(xy) or np.abs(xy).max() < GEOREFERENCED_M:
+        return 0.0, 0.0
+    centre = 0.5 * (xy.min(axis=0) + xy.max(axis=0))
+    return float(np.round(centre[0], -2)), float(np.round(centre[1], -2))
 
 
 def render(scene: Scene) -> bytes:
@@ -166,7 +199,8 @@ def render(scene: Scene) -> bytes:
 FONT_PX, TITLE_PX = 13, 15  # text sizes (final pixels)
 
 
-def _font(size: int) -> Any:
+def font(size: int) -> Any:
+    """Pillow's default scalable font at ``size`` final pixels (drawn at :data:`SS` times)."""
     from PIL import ImageFont
 
     return ImageFont.load_default(size=size * SS)
@@ -208,29 +242,35 @@ def vectors(image: Any, view: View, scene: Scene, ticks: tuple[np.ndarray, np.nd
     from PIL import ImageDraw
 
     pen = ImageDraw.Draw(image)
-    font = _font(FONT_PX)
-    _frame(pen, view, ticks, font)
+    face = font(FONT_PX)
+    _frame(pen, view, ticks, face, scene.origin)
     for edge in scene.edges:
         _edge(pen, view.px(edge.a), view.px(edge.b), edge.style, edge.residual_cm, scene.top_cm)
+    for station in scene.stations:
+        _station(pen, view.px(station.xy), station, face)
     for scan in scene.scans:
         if scan.position is not None:
-            _scanner(pen, view.px(scan.position), scan, font)
-    _axis_labels(image, pen, view, font)
+            _scanner(pen, view.px(scan.position), scan, face)
+    _axis_labels(image, pen, view, face, scene.origin)
     _title(pen, view, scene.title)
     y = view.area[1]
     if scene.top_cm is not None:
-        y = _colour_bar(pen, view, scene.top_cm, font)
-    _legend(pen, view, scene.scans, y + 24 * SS, font)
+        y = _colour_bar(pen, view, scene.top_cm, face)
+    y = _key(pen, view, scene, y + 24 * SS, face)
+    _legend(pen, view, scene.scans, y + 10 * SS, face)
 
 
-def _frame(pen: Any, view: View, ticks: tuple[np.ndarray, np.ndarray], font: Any) -> None:
+def _frame(
+    pen: Any, view: View, ticks: tuple[np.ndarray, np.ndarray], face: Any, origin: XY
+) -> None:
     left, top, right, bottom = view.area
     pen.rectangle([left, top, right, bottom], outline=INK, width=SS)
     xs, ys = ticks
     for x, (c, _) in zip(xs, view.px(np.column_stack([xs, np.zeros(len(xs))])), strict=True):
-        pen.text((c, bottom + 5 * SS), tick_label(x), fill=INK, font=font, anchor="mt")
+        label = tick_label(x - origin[0])
+        pen.text((c, bottom + 5 * SS), label, fill=INK, font=face, anchor="mt")
     for y, (_, r) in zip(ys, view.px(np.column_stack([np.zeros(len(ys)), ys])), strict=True):
-        pen.text((left - 5 * SS, r), tick_label(y), fill=INK, font=font, anchor="rm")
+        pen.text((left - 5 * SS, r), tick_label(y - origin[1]), fill=INK, font=face, anchor="rm")
 
 
 def _dashes(a: np.ndarray, b: np.ndarray, dash: float) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -239,17 +279,21 @@ def _dashes(a: np.ndarray, b: np.ndarray, dash: float) -> list[tuple[np.ndarray,
     return [(a + (b - a) * t[k], a + (b - a) * t[k + 1]) for k in range(0, n, 2)]
 
 
-def _edge(pen: Any, a: np.ndarray, b: np.ndarray, style: EdgeStyle, cm: float, top: float | None):
-    if style is EdgeStyle.REJECTED:
+def _edge(
+    pen: Any, a: np.ndarray, b: np.ndarray, style: EdgeStyle, cm: float, top: float | None
+) -> None:
+    dashed = {EdgeStyle.REJECTED: REJECTED, EdgeStyle.UNCHECKED: UNCHECKED}
+    if style in dashed:
         for p, q in _dashes(a, b, 6.0 * SS):
-            pen.line([tuple(p), tuple(q)], fill=REJECTED, width=round(1.5 * SS))
+            pen.line([tuple(p), tuple(q)], fill=dashed[style], width=round(1.5 * SS))
         return
-    colour = {EdgeStyle.OK: OK_LINK, EdgeStyle.FAILED: UNUSED}.get(style)
-    fill = colour if colour is not None else viridis(cm / (top or 1.0))
-    pen.line([tuple(a), tuple(b)], fill=fill, width=(2 if colour is None else 1) * SS)
+    if style is EdgeStyle.UNUSED:
+        pen.line([tuple(a), tuple(b)], fill=UNUSED, width=SS)
+        return
+    pen.line([tuple(a), tuple(b)], fill=viridis(cm / (top or 1.0)), width=2 * SS)
 
 
-def _scanner(pen: Any, p: np.ndarray, scan: Scan, font: Any) -> None:
+def _scanner(pen: Any, p: np.ndarray, scan: Scan, face: Any) -> None:
     c, r, s = float(p[0]), float(p[1]), 6.0 * SS
     if scan.status is NodeStatus.OK:
         pen.polygon([(c, r - s), (c - s, r + 0.7 * s), (c + s, r + 0.7 * s)], fill=INK)
@@ -259,33 +303,51 @@ def _scanner(pen: Any, p: np.ndarray, scan: Scan, font: Any) -> None:
         pen.line([(c - s, r - s), (c + s, r + s)], fill=REJECTED, width=SS * 2)
         pen.line([(c - s, r + s), (c + s, r - s)], fill=REJECTED, width=SS * 2)
     label = str(scan.index) if scan.status is NodeStatus.OK else f"{scan.index} {scan.status}"
-    pen.text((c + s, r - s), label, fill=INK, font=font, anchor="ld")
+    pen.text((c + s, r - s), label, fill=INK, font=face, anchor="ld")
 
 
-def _axis_labels(image: Any, pen: Any, view: View, font: Any) -> None:
+def _diamond(pen: Any, c: float, r: float, s: float, colour: str) -> None:
+    pen.polygon([(c, r - s), (c + s, r), (c, r + s), (c - s, r)], outline=colour, width=2 * SS)
+
+
+def _station(pen: Any, p: np.ndarray, station: Station, face: Any) -> None:
+    """A control station: a diamond around its given position, green when used, red when not,
+    with its name below."""
+    c, r, s = float(p[0]), float(p[1]), 10.0 * SS
+    colour = STATION if station.used else REJECTED
+    _diamond(pen, c, r, s, colour)
+    label = station.name if station.used else f"{station.name} rejected"
+    pen.text((c, r + s + 2 * SS), label, fill=colour, font=face, anchor="mt")
+
+
+def _axis_labels(image: Any, pen: Any, view: View, face: Any, origin: XY) -> None:
     from PIL import Image, ImageDraw
 
     left, top, right, bottom = view.area
-    pen.text(((left + right) / 2, view.size[1] - 8 * SS), "x world (m)", fill=INK, font=font,
+    x_text, y_text = (
+        (f"x - {tick_label(origin[0])} (m)", f"y - {tick_label(origin[1])} (m)")
+        if origin != (0.0, 0.0)
+        else ("x world (m)", "y world (m)")
+    )
+    pen.text(((left + right) / 2, view.size[1] - 8 * SS), x_text, fill=INK, font=face,
              anchor="md")  # fmt: skip
-    text = "y world (m)"
-    box = pen.textbbox((0, 0), text, font=font)
+    box = pen.textbbox((0, 0), y_text, font=face)
     label = Image.new("L", (box[2] + 2 * SS, box[3] + 2 * SS), 255)
-    ImageDraw.Draw(label).text((SS, SS), text, fill=0, font=font)
+    ImageDraw.Draw(label).text((SS, SS), y_text, fill=0, font=face)
     label = label.rotate(90, expand=True)
     y = (top + bottom - label.height) // 2
     image.paste((0, 0, 0), (4 * SS, y), label.point(lambda v: 255 - v))
 
 
 def _title(pen: Any, view: View, lines: tuple[str, ...]) -> None:
-    font = _font(TITLE_PX)
+    face = font(TITLE_PX)
     left, top, right, _ = view.area
     for k, line in enumerate(reversed(lines)):
         y = top - (8 + TITLE_LINE * k) * SS
-        pen.text(((left + right) / 2, y), line, fill=INK, font=font, anchor="md")
+        pen.text(((left + right) / 2, y), line, fill=INK, font=face, anchor="md")
 
 
-def _colour_bar(pen: Any, view: View, top_cm: float, font: Any) -> int:
+def _colour_bar(pen: Any, view: View, top_cm: float, face: Any) -> int:
     """The residual colour bar in the right margin; returns its bottom row."""
     left = view.area[2] + 26 * SS
     y0 = view.area[1] + 48 * SS
@@ -296,14 +358,37 @@ def _colour_bar(pen: Any, view: View, top_cm: float, font: Any) -> int:
     for frac in (0.0, 0.5, 1.0):
         y = y0 + (1.0 - frac) * (height - 1)
         pen.line([(left + width, y), (left + width + 4 * SS, y)], fill=INK, width=SS)
-        pen.text((left + width + 7 * SS, y), f"{frac * top_cm:.2g}", fill=INK, font=font,
+        pen.text((left + width + 7 * SS, y), f"{frac * top_cm:.2g}", fill=INK, font=face,
                  anchor="lm")  # fmt: skip
-    pen.text((left, y0 - 30 * SS), "link residual after", fill=INK, font=font, anchor="ls")
-    pen.text((left, y0 - 14 * SS), "adjustment (cm)", fill=INK, font=font, anchor="ls")
+    pen.text((left, y0 - 30 * SS), "residual of a checked", fill=INK, font=face, anchor="ls")
+    pen.text((left, y0 - 14 * SS), "link (cm)", fill=INK, font=face, anchor="ls")
     return y0 + height
 
 
-def _legend(pen: Any, view: View, scans: tuple[Scan, ...], y: int, font: Any) -> None:
+def _key(pen: Any, view: View, scene: Scene, y: int, face: Any) -> int:
+    """The link styles (those drawn) and the station marker, from row ``y``; returns the
+    row below them."""
+    left = view.area[2] + 26 * SS
+    drawn = {e.style for e in scene.edges}
+    words = {
+        EdgeStyle.UNCHECKED: "not checked",
+        EdgeStyle.REJECTED: "rejected",
+        EdgeStyle.UNUSED: "not used",
+    }
+    for style, word in words.items():
+        if style in drawn:
+            a, b = np.array([left, y]), np.array([left + 28 * SS, y])
+            _edge(pen, a, b, style, 0.0, None)
+            pen.text((left + 34 * SS, y), word, fill=INK, font=face, anchor="lm")
+            y += 18 * SS
+    if scene.stations:
+        _diamond(pen, left + 8 * SS, y, 7 * SS, STATION)
+        pen.text((left + 34 * SS, y), "control station", fill=INK, font=face, anchor="lm")
+        y += 18 * SS
+    return y
+
+
+def _legend(pen: Any, view: View, scans: tuple[Scan, ...], y: int, face: Any) -> None:
     """One coloured dot and name per scan with points, in the right margin from row ``y``."""
     left = view.area[2] + 26 * SS
     for scan in scans:
@@ -311,5 +396,5 @@ def _legend(pen: Any, view: View, scans: tuple[Scan, ...], y: int, font: Any) ->
             continue
         r = 4 * SS
         pen.ellipse([left, y - r, left + 2 * r, y + r], fill=rgb(TAB10[scan.index % len(TAB10)]))
-        pen.text((left + 3 * r, y), scan.name, fill=INK, font=font, anchor="lm")
+        pen.text((left + 3 * r, y), scan.name, fill=INK, font=face, anchor="lm")
         y += 18 * SS

@@ -83,7 +83,7 @@ PAIR_COLUMNS = _names(
     "link target source",
     _POSE_AND_FIT,
     "degenerate iterations converged runtime_s status reason notes",
-    "kind network residual_deg residual_cm",
+    "kind network residual_deg residual_cm network_reason",
 )
 POSE_COLUMNS = _names(
     "scan file has_pose x y z yaw_deg",
@@ -106,14 +106,21 @@ def report_row(result: RegistrationResult) -> dict[str, Any]:
     return {"target": target, "source": source, **metrics(result, REPORT_COLUMNS)}
 
 
-def pair_row(link: Any, names: tuple[str, ...], fit: Any = None) -> dict[str, Any]:
+def pair_row(
+    link: Any, names: tuple[str, ...], fit: Any = None, left_out: Any = None
+) -> dict[str, Any]:
     """The row of ``pairs.csv`` of a campaign's link (``names``: the scans' names; ``fit``:
-    what the network made of it, a :class:`~ndt_cli.pipeline.solution.LinkFit`)."""
+    what the network made of it, a :class:`~ndt_cli.pipeline.solution.LinkFit`; ``left_out``:
+    for a registration tried and left out of the network, why, a
+    :class:`~ndt_cli.pipeline.result.Dropped`)."""
     row = {"link": link.index, "target": names[link.target], "source": names[link.source]}
     row.update(metrics(link.result, PAIR_COLUMNS))
     row.update(status=link.status.value, reason=link.reason, kind=link.kind.value)
     residual = None if fit is None else fit.residual
     row["network"] = "" if fit is None else fit.state.value
+    row["network_reason"] = "" if fit is None else fit.reason
+    if left_out is not None:
+        row["network"], row["network_reason"] = left_out.value, left_out.reason
     row["residual_deg"] = "" if residual is None else num(residual.rotation_deg, 4)
     row["residual_cm"] = "" if residual is None else num(100 * residual.translation_m, 2)
     return row

@@ -1,6 +1,7 @@
-"""Top view of a campaign (``topview.png``): every posed scan's slice points in the world frame,
-the scanner positions marked by status, and every link coloured by its residual after the
-adjustment (:mod:`ndt_cli.report.planview` draws it)."""
+"""Top view of a campaign (``topview.png``, the report's plan): every posed scan's slice points
+in the world frame, the scanner positions marked by status, the control stations at their given
+coordinates, and every link drawn by its state in the network (a checked link coloured by its
+residual) (:mod:`ndt_cli.report.planview` draws it)."""
 
 from __future__ import annotations
 
@@ -10,19 +11,35 @@ from ndt_cli.pipeline.links import Link
 from ndt_cli.pipeline.result import ChainResult
 from ndt_cli.pipeline.solution import LinkFit
 from ndt_cli.pipeline.verify import EdgeState, NodeStatus
-from ndt_cli.report.planview import Edge, EdgeStyle, Scan, Scene, render
+from ndt_cli.report.planview import Edge, EdgeStyle, Scan, Scene, Station, origin_of, render
+from ndt_cli.report.world import world_summary
+
+_STYLES = {
+    EdgeState.CONFIRMED: EdgeStyle.RESIDUAL,
+    EdgeState.USED: EdgeStyle.UNCHECKED,
+    EdgeState.REJECTED: EdgeStyle.REJECTED,
+    EdgeState.UNUSED: EdgeStyle.UNUSED,
+}
 
 
 def _edge(link: Link, fit: LinkFit, a: np.ndarray, b: np.ndarray) -> Edge:
-    if fit.state is EdgeState.REJECTED or (not link.ok and fit.state is EdgeState.UNUSED):
-        return Edge(a, b, EdgeStyle.REJECTED)
-    if fit.residual is None:
-        return Edge(a, b, EdgeStyle.OK if link.ok else EdgeStyle.FAILED)
-    return Edge(a, b, EdgeStyle.RESIDUAL, fit.residual.translation_m * 100)
+    style = _STYLES[fit.state]
+    if style is EdgeStyle.RESIDUAL and fit.residual is not None:
+        return Edge(a, b, style, fit.residual.translation_m * 100)
+    return Edge(a, b, EdgeStyle.UNCHECKED if style is EdgeStyle.RESIDUAL else style)
+
+
+def stations_of(result: ChainResult) -> tuple[Station, ...]:
+    """The control stations at their given coordinates, when the world is the control's."""
+    datum = result.solution.datum
+    if datum is None or not datum.frame.from_control:
+        return ()
+    rows = world_summary(result)["controls"]
+    return tuple(Station(r["scan"], np.array(r["given"][:2]), bool(r["used"])) for r in rows)
 
 
 def scene_of(result: ChainResult) -> Scene:
-    """The scans, links and title of a chain's result."""
+    """The scans, links, stations and title of a chain's result."""
     scans = []
     for k, s in enumerate(result.solution.scans):
         T, pts = s.T_world_scan, result.previews.get(k)
@@ -37,12 +54,16 @@ def scene_of(result: ChainResult) -> Scene:
             res += [edges[-1].residual_cm] if edges[-1].style is EdgeStyle.RESIDUAL else []
     top = max(1.0, float(np.percentile(res, 95))) if res else None
     not_ok = [s.name for s in scans if s.status is not NodeStatus.OK]
-    title = ("Scans (slice points) and links (red dashed: rejected or failed)",)
+    stations = stations_of(result)
+    where = [s.position for s in scans if s.position is not None] + [s.xy for s in stations]
+    title = ("Scans (slice points), scanners and links by their state in the network",)
     return Scene(
         tuple(scans),
         tuple(edges),
         top,
         title + ((f"not ok: {', '.join(not_ok)}",) if not_ok else ()),
+        origin_of(np.array(where).reshape(-1, 2)),
+        stations,
     )
 
 
