@@ -69,6 +69,22 @@ def test_json_on_stdout_and_config_and_init(pair, tmp_path):
     assert "method: lm" in (tmp_path / "o" / "config_used.yaml").read_text()
 
 
+def test_init_sigma_sets_where_the_guess_starts_and_a_bad_one_is_one_line(pair, tmp_path):
+    a, b, ref = pair
+    init = tmp_path / "init.txt"
+    init.write_text("\n".join(" ".join(f"{v:.10f}" for v in row) for row in ref))
+    args = [str(a), str(b), "--init", str(init), "--json"]
+    wide = runner.invoke(register_app, [*args, "--init-sigma", "4,1", "-o", str(tmp_path / "w")])
+    assert wide.exit_code == 0, wide.output
+    levels = json.loads(wide.stdout)["levels"]
+    # 4 m: the first cell of at least 8 m; 1 degree: the guess's heading alone
+    assert [lv["cell_size"] for lv in levels] == [10.0, 5.0, 2.0, 1.0]
+    for bad in ("1", "1,x", "0,5", "1,200", "nan,5"):
+        res = runner.invoke(register_app, [*args, "--init-sigma", bad, "-o", str(tmp_path / "b")])
+        assert res.exit_code == 2 and "--init-sigma" in res.output, (bad, res.output)
+        assert "Traceback" not in res.output and not (tmp_path / "b").exists()
+
+
 def _write(path, text):
     path.write_text(text)
     return path

@@ -55,6 +55,16 @@ def register(
     init: Annotated[
         Path | None, typer.Option(help="Initial guess of T_target_source: a 4x4 text file.")
     ] = None,
+    init_sigma: Annotated[
+        str,
+        typer.Option(
+            "--init-sigma",
+            metavar="M,DEG",
+            help="How far the --init guess may be from the truth: metres and degrees (a GNSS "
+            "position or a hand placement: 1,5). Registration starts at the smallest cell of "
+            "at least twice the metres and searches the heading within the degrees.",
+        ),
+    ] = "1,5",
     out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("ndt_results"),
     print_config: PrintConfigOpt = False,
     json_out: JsonOpt = False,
@@ -68,8 +78,9 @@ def register(
         cfg = load_config(config, print_config)
         if target is None or source is None:
             raise InputError("give TARGET and SOURCE (see ndt-register --help)")
+        sigma = _sigma(init_sigma)
         check_out(out, target, source, init, config)
-        result = _run(target, source, cfg, init, out)
+        result = _run(target, source, cfg, init, sigma, out)
     _show(result, out, json_out, quiet)
     if not result.ok:
         reasons = "; ".join(result.warnings)
@@ -80,7 +91,29 @@ def register(
         raise typer.Exit(EXIT_REGISTRATION)
 
 
-def _run(target: Path, source: Path, cfg: object, init: Path | None, out: Path) -> object:
+def _sigma(text: str) -> tuple[float, float]:
+    """``--init-sigma M,DEG``, checked: metres in (0, 1000], degrees in (0, 180]."""
+    from ndt_cli.errors import ConfigError
+
+    try:
+        metres, degrees = (float(v) for v in text.split(","))
+    except ValueError:
+        raise ConfigError(f"--init-sigma must be METRES,DEGREES (e.g. 1,5), got {text!r}") from None
+    if not (0 < metres <= 1000 and 0 < degrees <= 180):
+        raise ConfigError(
+            f"--init-sigma: metres must be in (0, 1000] and degrees in (0, 180], got {text!r}"
+        )
+    return metres, degrees
+
+
+def _run(
+    target: Path,
+    source: Path,
+    cfg: object,
+    init: Path | None,
+    sigma: tuple[float, float],
+    out: Path,
+) -> object:
     """Check every input before the work (the output is checked), register, publish the
     outputs."""
     from ndt_cli.io.matrices import read_matrix
@@ -90,10 +123,12 @@ def _run(target: Path, source: Path, cfg: object, init: Path | None, out: Path) 
     check_readable(source)
     T_init = read_matrix(init) if init is not None else None
 
+    from ndt_cli.ndt.register import Guess
     from ndt_cli.ndt.register import register as run  # the kernels: only once inputs are good
     from ndt_cli.report.register_outputs import write_register_outputs
 
-    result = run(target, source, cfg, init=T_init)
+    guess = None if T_init is None else Guess(T_init, *sigma)
+    result = run(target, source, cfg, init=guess)
     write_register_outputs(out, result, cfg, command_line())
     return result
 
