@@ -21,7 +21,7 @@ from ndt_cli.ndt.kernels import SCORE, SourcePoints, accumulate
 from ndt_cli.ndt.levels import SourceSampler, TargetMaps
 from ndt_cli.ndt.optimize import optimize
 from ndt_cli.ndt.prepare import PreparedScan
-from ndt_cli.ndt.register import register_prepared
+from ndt_cli.ndt.register import Guess, register_prepared
 from ndt_cli.pipeline.local_pool import WorkerPool
 from ndt_cli.pipeline.workers import Failure, default_jobs, threads_per_job
 
@@ -145,10 +145,12 @@ def _basin_task(
     target = replace(target, slices=target.slices[:k])
     source = replace(source, slices=source.slices[:k])
     pair = Pair(target, source, aligned)
+    wide = max(vcfg.grid.cell_sizes) / 2.0  # the paper's basin: the whole schedule from the start
     rows = []
     for dx, dy, dyaw in offsets:
         start = aligned + np.array([dx, dy, np.radians(dyaw)])
-        result = register_prepared(target, source, vcfg, init=pair.to_matrix(start))
+        init = Guess(pair.to_matrix(start), sigma_m=wide, sigma_deg=1.0)  # its heading only
+        result = register_prepared(target, source, vcfg, init=init)
         local = target.to_local() @ result.T_target_source @ source.from_local()
         err_t = float(np.hypot(local[0, 3] - aligned[0], local[1, 3] - aligned[1]))
         err_r = float(abs(np.degrees(wrap_angle(yaw_of(local) - aligned[2]))))
