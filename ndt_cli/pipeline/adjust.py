@@ -28,6 +28,7 @@ import numpy as np
 
 from ndt_cli.pipeline.covariance import sqrt_information
 from ndt_cli.pipeline.graph import CHI2_6_999, Edge, EdgeResidual, components, compose, residuals
+from ndt_cli.pipeline.marginals import marginal_covariances
 
 PRIOR_SIGMA = 1e-6  # rad and m: the anchor's prior (fixes the gauge)
 _KERNELS = ("huber", "cauchy", "none")
@@ -178,14 +179,6 @@ class Solver:
         optimizer = g.LevenbergMarquardtOptimizer(graph, values, params)
         return graph, optimizer.optimize(), optimizer.iterations()
 
-    def marginals(self, sol: Solution) -> object:
-        return self.g.Marginals(sol.graph, sol.values)
-
-    def joint(self, marginals: object, i: int, j: int) -> np.ndarray:
-        """12x12 joint covariance of nodes i and j (blocks in order i, j)."""
-        m = marginals.jointMarginalCovariance(self.g.KeyVector([i, j]))
-        return np.block([[m.at(i, i), m.at(i, j)], [m.at(j, i), m.at(j, j)]])
-
 
 def _check(
     n_nodes: int,
@@ -223,10 +216,9 @@ def adjustment_of(
     covs: list[np.ndarray | None] = [None] * solver.n
     t1 = time.perf_counter()
     if with_marginals:
-        m = solver.marginals(sol)
-        for v, p in enumerate(poses):
-            if p is not None:
-                covs[v] = m.marginalCovariance(v)
+        posed = [v for v, p in enumerate(poses) if p is not None]
+        for v, cov in marginal_covariances(solver.g, sol.graph, sol.values, posed).items():
+            covs[v] = cov
     return Adjustment(
         poses=tuple(poses),
         covariances=tuple(covs),

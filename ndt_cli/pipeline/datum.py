@@ -47,6 +47,7 @@ from ndt_cli.core.transforms import levelling_rotation, rotation4, translation
 from ndt_cli.pipeline.adjust import Solver
 from ndt_cli.pipeline.consensus import Group, largest_group, likely_cause
 from ndt_cli.pipeline.control import Control, Station, unmatched
+from ndt_cli.pipeline.marginals import marginal_covariances
 
 VERTICAL_SIGMA_DEG = {  # how well each way of finding a scan's vertical finds it (1 sigma)
     "scanner": 0.005,  # a dual-axis compensator
@@ -407,8 +408,7 @@ def _with_control(
         if not back:
             break
         used += back
-    marginals = solver.g.Marginals(graph, values)
-    covariances = {v: marginals.marginalCovariance(v) for v in poses}
+    covariances = marginal_covariances(solver.g, graph, values, poses)
     shift = translation(origin)
     return {v: shift @ T for v, T in poses.items()}, covariances, set(used)
 

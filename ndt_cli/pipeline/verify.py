@@ -46,6 +46,7 @@ from ndt_cli.pipeline.graph import (
     compose,
     residuals,
 )
+from ndt_cli.pipeline.marginals import UNDETERMINED_VAR
 
 MAX_SIGMA_M = 0.2  # m: a scan whose adjusted horizontal position is less certain is suspect
 MAX_SIGMA_DEG = 0.2  # degrees: likewise for its heading
@@ -333,12 +334,16 @@ def _pinned(pose: np.ndarray, cov: np.ndarray | None) -> str:
     pos = R @ cov[3:, 3:] @ R.T
     w, V = np.linalg.eigh(pos[:2, :2])
     heading = float(np.degrees(np.sqrt(max((R @ cov[:3, :3] @ R.T)[2, 2], 0.0))))
+    d = V[:, 1]
+    if w[1] >= UNDETERMINED_VAR / 100:
+        return f"position along ({d[0]:.2f}, {d[1]:.2f}) not determined by its links"
     if np.sqrt(max(w[1], 0.0)) > MAX_SIGMA_M:
-        d = V[:, 1]
         return (
             f"position along ({d[0]:.2f}, {d[1]:.2f}) not pinned down by its links "
             f"(sigma {np.sqrt(w[1]):.3g} m > {MAX_SIGMA_M} m)"
         )
+    if heading > np.degrees(np.sqrt(UNDETERMINED_VAR / 100)):
+        return "heading not determined by its links"
     if heading > MAX_SIGMA_DEG:
         return f"heading not pinned down by its links (sigma {heading:.3g} deg > {MAX_SIGMA_DEG})"
     return ""
