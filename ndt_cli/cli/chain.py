@@ -15,6 +15,7 @@ from ndt_cli.cli.common import (
     ControlOpt,
     CrsOpt,
     DebugOpt,
+    InitSigmaOpt,
     JobsOpt,
     JsonOpt,
     NeighboursOpt,
@@ -110,8 +111,21 @@ def chain(
     radius: RadiusOpt = None,
     pairs: Annotated[
         Path | None,
-        typer.Option(help="CSV of target,source rows: more pairs to register (scan names)."),
+        typer.Option(
+            help="CSV of target,source rows: more pairs to register (scan names); a row may "
+            "add a guess of T_target_source: x,y,z,yaw_deg or a 4x4 file."
+        ),
     ] = None,
+    init_poses: Annotated[
+        Path | None,
+        typer.Option(
+            "--init-poses",
+            help="Approximate T_world_scan of scans: lines of a name and 16 numbers (as "
+            "poses.txt) or x y z yaw_deg (GNSS and a compass, yesterday's campaign, a "
+            "placement by hand). Links between them are registered from the guess too.",
+        ),
+    ] = None,
+    init_sigma: InitSigmaOpt = "1,5",
     control: ControlOpt = None,
     crs: CrsOpt = None,
     print_config: PrintConfigOpt = False,
@@ -139,8 +153,10 @@ def chain(
             pairs=pairs,
             control=control,
             crs=crs,
+            init_poses=init_poses,
+            init_sigma=init_sigma,
         )
-        check_out(out, *inputs.paths, pairs, config, control)
+        check_out(out, *inputs.paths, pairs, config, control, init_poses)
         with output_lock(out, "ndt-chain"):
             if not overwrite:
                 refuse_another_campaign(out, inputs.paths)

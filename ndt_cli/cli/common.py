@@ -70,6 +70,16 @@ RadiusOpt = Annotated[
         show_default="2.2 x the median distance between nearest scans",
     ),
 ]
+InitSigmaOpt = Annotated[
+    str,
+    typer.Option(
+        "--init-sigma",
+        metavar="M,DEG",
+        help="How far a guess may be from the truth: metres and degrees (a GNSS position or a "
+        "placement by hand: 1,5). Registration from a guess starts at the smallest cell of at "
+        "least twice the metres and searches the heading within the degrees.",
+    ),
+]
 ControlOpt = Annotated[
     Path | None,
     typer.Option(

@@ -12,6 +12,7 @@ from ndt_cli.cli.common import (
     FORMATS,
     ConfigOpt,
     DebugOpt,
+    InitSigmaOpt,
     JsonOpt,
     OneLineCommand,
     PrintConfigOpt,
@@ -55,16 +56,7 @@ def register(
     init: Annotated[
         Path | None, typer.Option(help="Initial guess of T_target_source: a 4x4 text file.")
     ] = None,
-    init_sigma: Annotated[
-        str,
-        typer.Option(
-            "--init-sigma",
-            metavar="M,DEG",
-            help="How far the --init guess may be from the truth: metres and degrees (a GNSS "
-            "position or a hand placement: 1,5). Registration starts at the smallest cell of "
-            "at least twice the metres and searches the heading within the degrees.",
-        ),
-    ] = "1,5",
+    init_sigma: InitSigmaOpt = "1,5",
     out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("ndt_results"),
     print_config: PrintConfigOpt = False,
     json_out: JsonOpt = False,
@@ -78,7 +70,9 @@ def register(
         cfg = load_config(config, print_config)
         if target is None or source is None:
             raise InputError("give TARGET and SOURCE (see ndt-register --help)")
-        sigma = _sigma(init_sigma)
+        from ndt_cli.pipeline.guesses import parse_sigma
+
+        sigma = parse_sigma(init_sigma)
         check_out(out, target, source, init, config)
         result = _run(target, source, cfg, init, sigma, out)
     _show(result, out, json_out, quiet)
@@ -89,21 +83,6 @@ def register(
             err=True,
         )
         raise typer.Exit(EXIT_REGISTRATION)
-
-
-def _sigma(text: str) -> tuple[float, float]:
-    """``--init-sigma M,DEG``, checked: metres in (0, 1000], degrees in (0, 180]."""
-    from ndt_cli.errors import ConfigError
-
-    try:
-        metres, degrees = (float(v) for v in text.split(","))
-    except ValueError:
-        raise ConfigError(f"--init-sigma must be METRES,DEGREES (e.g. 1,5), got {text!r}") from None
-    if not (0 < metres <= 1000 and 0 < degrees <= 180):
-        raise ConfigError(
-            f"--init-sigma: metres must be in (0, 1000] and degrees in (0, 180], got {text!r}"
-        )
-    return metres, degrees
 
 
 def _run(

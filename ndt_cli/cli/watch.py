@@ -33,10 +33,10 @@ from ndt_cli.cli.common import (
 if TYPE_CHECKING:
     from ndt_cli.cli.watch_screen import Screen
     from ndt_cli.config import Config
-    from ndt_cli.pipeline.campaign import NetworkOptions
     from ndt_cli.pipeline.executors import Executor
     from ndt_cli.pipeline.field import FieldCampaign
     from ndt_cli.pipeline.field_events import Started
+    from ndt_cli.pipeline.options import NetworkOptions
     from ndt_cli.pipeline.result import ChainResult
 
 watch_app = new_app()

@@ -26,7 +26,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -38,7 +38,7 @@ from ndt_cli.config.schema import Config
 from ndt_cli.errors import UserInterruptError, caused_by_interrupt
 from ndt_cli.ndt.overlap import CoarseMatch, coarse_match
 from ndt_cli.pipeline import placement
-from ndt_cli.pipeline.control import Station, matched
+from ndt_cli.pipeline.control import matched
 from ndt_cli.pipeline.discovery import (
     HINTS,
     Placed,
@@ -51,6 +51,7 @@ from ndt_cli.pipeline.discovery import (
     predict,
 )
 from ndt_cli.pipeline.executors import Executor
+from ndt_cli.pipeline.guesses import relative
 from ndt_cli.pipeline.link_runner import LinkRunner
 from ndt_cli.pipeline.links import Link, LinkStore
 from ndt_cli.pipeline.network import (
@@ -62,6 +63,7 @@ from ndt_cli.pipeline.network import (
     pair_of,
     plan_near,
 )
+from ndt_cli.pipeline.options import NetworkOptions
 from ndt_cli.pipeline.result import ChainResult, Dropped, ScanReport, TriedLink, scan_report
 from ndt_cli.pipeline.scans import DuplicateScanError, file_hash, scan_names
 from ndt_cli.pipeline.solution import NetworkSolution, solve
@@ -75,27 +77,6 @@ BRIDGES = 2  # registrations tried between a group and the others, best coarse m
 PROBES = 2  # placed scans nearest to a prediction that a scan is registered to, to test it
 ATTEMPTS = 2  # distinct predictions of a scan's place tried by full registrations
 BRIDGE_ROUNDS = 3  # rounds in a row without a join before the groups are left apart
-
-
-@dataclass(frozen=True)
-class NetworkOptions:
-    """Which links the network holds and how it is solved: each scan's ``neighbours`` nearest
-    scans within ``radius`` m (None: 2.2 times the median distance between nearest scans; one
-    neighbour: the classic chain in the order given), whether it is ``adjust``-ed, and the
-    user's ``pairs`` (campaign indices)."""
-
-    neighbours: int = 4
-    adjust: bool = True
-    radius: float | None = None
-    pairs: tuple[PlannedLink, ...] = ()
-    stations: tuple[Station, ...] = ()  # of known coordinates (the world: theirs); a station
-    # counts once its scan is in the campaign (field mode: the control file is read first)
-    crs: str = ""  # the coordinate system of the stations, as WKT ("" when not given)
-    grid_scale: float = 1.0  # its grid distance over ground distance at the stations
-
-    @property
-    def classic(self) -> bool:
-        return self.neighbours == 1
 
 
 class Campaign:
@@ -383,9 +364,15 @@ class Campaign:
             failed = 0 if any(joined) else failed + 1
 
     def _positions(self) -> dict[int, tuple[np.ndarray, float]]:
-        """(x, y) m and horizontal sigma of the scans with a control station."""
-        found = matched(self.net.stations, scan_names(self.paths))
-        return {c.scan: (c.xyz[:2], c.sigma_xy) for c in found}
+        """(x, y) m and horizontal sigma of the scans with a control station; without
+        control, of those with an approximate pose (their frames may differ from the
+        control's)."""
+        if self.net.stations:
+            found = matched(self.net.stations, scan_names(self.paths))
+            return {c.scan: (c.xyz[:2], c.sigma_xy) for c in found}
+        sigma = self.net.init_sigma[0]
+        n = len(self.paths)
+        return {k: (T[:2, 3], sigma) for k, T in self.net.init_poses.items() if k < n}
 
     def _near(self, scan: int, candidates: Iterable[int]) -> list[int]:
         """Candidates near ``scan`` by known positions (:func:`near_by_position`)."""
@@ -453,7 +440,8 @@ class Campaign:
         a, b = pair
         if (self.hashes[b], b) < (self.hashes[a], a):
             a, b = b, a
-        return PlannedLink(a, b, LinkKind.FOUND)
+        guess = relative(self.net.init_poses, a, b, self.net.init_sigma)
+        return PlannedLink(a, b, LinkKind.FOUND, guess)
 
     def _register(self, planned: Sequence[PlannedLink], both_ways: bool = False) -> None:
         """Register the planned links not registered yet (see :meth:`LinkRunner.register`)."""

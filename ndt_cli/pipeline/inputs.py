@@ -12,9 +12,10 @@ from pathlib import Path
 
 from ndt_cli.errors import ConfigError, InputError, OutputError
 from ndt_cli.io.crs import crs_wkt
-from ndt_cli.pipeline.campaign import NetworkOptions
 from ndt_cli.pipeline.control import check_in_system, matched, read_stations
+from ndt_cli.pipeline.guesses import parse_sigma, read_init_poses
 from ndt_cli.pipeline.network import read_pairs
+from ndt_cli.pipeline.options import NetworkOptions
 from ndt_cli.pipeline.scans import DuplicateScanError, file_hash, natural_sort, scan_names
 
 
@@ -95,16 +96,22 @@ def network_options(
     names: Sequence[str] | None,
     control: Path | None = None,
     crs: str | None = None,
+    init_poses: Path | None = None,
+    init_sigma: str = "1,5",
 ) -> NetworkOptions:
     """The network's options, checked; ``pairs``: a CSV of user pairs (see
     :func:`~ndt_cli.pipeline.network.read_pairs`); ``control``: a CSV of stations
-    (:mod:`ndt_cli.pipeline.control`) and ``crs`` their coordinate system. ``names``: the
-    campaign's scans, every station must name one; None in field mode (scans yet to land)."""
+    (:mod:`ndt_cli.pipeline.control`) and ``crs`` their coordinate system; ``init_poses``:
+    approximate poses of scans within ``init_sigma`` (``M,DEG``; :mod:`~ndt_cli.pipeline.guesses`).
+    ``names``: the campaign's scans, every station must name one; None in field mode (scans yet
+    to land)."""
     if not 1 <= neighbours <= 10:
         raise ConfigError(f"--neighbours must be between 1 and 10, got {neighbours}")
     if radius is not None and not 0 < radius <= 1e4:
         raise ConfigError(f"--radius must be above 0 and at most 10000 m, got {radius}")
-    user = tuple(read_pairs(pairs, names or [])) if pairs is not None else ()
+    sigma = parse_sigma(init_sigma)
+    user = tuple(read_pairs(pairs, names or [], sigma)) if pairs is not None else ()
+    guessed = read_init_poses(init_poses, names or []) if init_poses is not None else {}
     stations = read_stations(control) if control is not None else ()
     if names is not None and control is not None:
         matched(stations, names, control)
@@ -116,7 +123,7 @@ def network_options(
     scale = 1.0
     if wkt and control is not None:
         scale = check_in_system(stations, wkt, crs, control)
-    return NetworkOptions(neighbours, adjust, radius, user, stations, wkt, scale)
+    return NetworkOptions(neighbours, adjust, radius, user, stations, wkt, scale, guessed, sigma)
 
 
 def chain_inputs(
@@ -129,6 +136,8 @@ def chain_inputs(
     pairs: Path | None = None,
     control: Path | None = None,
     crs: str | None = None,
+    init_poses: Path | None = None,
+    init_sigma: str = "1,5",
 ) -> ChainInputs:
     """Everything ``ndt-chain`` needs to know before it starts, checked."""
     paths = campaign_scans(scans)
@@ -138,7 +147,9 @@ def chain_inputs(
     check_scans(paths)
     names = scan_names(paths)
     index = anchor_index(anchor, names)
-    net = network_options(neighbours, adjust, radius, pairs, names, control, crs)
+    net = network_options(
+        neighbours, adjust, radius, pairs, names, control, crs, init_poses, init_sigma
+    )
     return ChainInputs(tuple(paths), index, net)
 
 

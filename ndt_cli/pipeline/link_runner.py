@@ -21,6 +21,7 @@ from ndt_cli.config.schema import Config
 from ndt_cli.ndt.prepare import PreparedScan
 from ndt_cli.ndt.result import Status
 from ndt_cli.pipeline.executors import Executor
+from ndt_cli.pipeline.guesses import guess_text
 from ndt_cli.pipeline.links import Link, LinkStore, link_key
 from ndt_cli.pipeline.network import LinkKind, Pair, PlannedLink
 from ndt_cli.pipeline.scans import scan_names
@@ -156,8 +157,9 @@ class LinkRunner:
             self.prepared.popitem(last=False)
 
     def _job(self, k: PlannedLink) -> LinkJob:
-        key = link_key(self.hashes[k.target], self.hashes[k.source], self.cfg_text)
-        return LinkJob(0, k.target, k.source, key, k.kind)
+        inputs = self.cfg_text + guess_text(k.guess)
+        key = link_key(self.hashes[k.target], self.hashes[k.source], inputs)
+        return LinkJob(0, k.target, k.source, key, k.kind, k.guess)
 
     def _task(self, job: LinkJob) -> Callable[[], Link]:
         i, j = job.target, job.source

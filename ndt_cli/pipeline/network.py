@@ -17,9 +17,10 @@ from __future__ import annotations
 
 import csv
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -39,11 +40,13 @@ class LinkKind(StrEnum):
 
 @dataclass(frozen=True)
 class PlannedLink:
-    """A pair to register: ``source`` onto ``target`` (scan indices), and why."""
+    """A pair to register: ``source`` onto ``target`` (scan indices), why, and a guess of
+    ``T_target_source`` (a :class:`~ndt_cli.ndt.register.Guess`; None: the search alone)."""
 
     target: int
     source: int
     kind: LinkKind
+    guess: Any = field(default=None, compare=False)
 
     @property
     def pair(self) -> Pair:
@@ -140,18 +143,22 @@ def _spanning_tree(ids: list[int], d: np.ndarray, failed: set[Pair]) -> set[Pair
     return out
 
 
-def read_pairs(path: Path, names: Sequence[str]) -> list[PlannedLink]:
+def read_pairs(
+    path: Path, names: Sequence[str], sigma: tuple[float, float] = (1.0, 5.0)
+) -> list[PlannedLink]:
     """User pairs from a CSV of ``target,source`` rows (scan names as the outputs show them,
     file names, or 0-based indices; a header row, a UTF-8 byte order mark and ``#`` comments
-    are allowed), one link per unordered pair (the first row wins). The file is streamed:
-    memory grows with the distinct pairs, not with the rows."""
+    are allowed), one link per unordered pair (the first row wins). A row may add a guess of
+    ``T_target_source``: ``x,y,z,yaw_deg`` or the name of a 4x4 file, within ``sigma`` (m,
+    degrees). The file is streamed: memory grows with the distinct pairs, not with the rows."""
     lookup = {name: k for k, name in enumerate(names)}
     lookup.update({Path(name).name: k for k, name in enumerate(names)})
     links: dict[tuple[int, int], PlannedLink] = {}
     try:
         with open(path, encoding="utf-8-sig", newline="") as fh:
             for number, row in enumerate(csv.reader(fh), 1):
-                link = _pair_row(number, [c.strip() for c in row], lookup, len(names), path)
+                cells = [c.strip() for c in row]
+                link = _pair_row(number, cells, lookup, len(names), path, sigma)
                 if link is not None:
                     links.setdefault(
                         (min(link.target, link.source), max(link.target, link.source)), link
@@ -165,7 +172,12 @@ def read_pairs(path: Path, names: Sequence[str]) -> list[PlannedLink]:
 
 
 def _pair_row(
-    number: int, cells: list[str], lookup: dict[str, int], n: int, path: Path
+    number: int,
+    cells: list[str],
+    lookup: dict[str, int],
+    n: int,
+    path: Path,
+    sigma: tuple[float, float],
 ) -> PlannedLink | None:
     """The link of one row of a pairs file; None for an empty row, a comment or a header (a
     first row of which no cell names or looks like a scan)."""
@@ -187,7 +199,19 @@ def _pair_row(
         raise InputError(f"line {number}: {what}", path)
     if ends[0] == ends[1]:
         raise InputError(f"line {number}: a scan cannot be registered onto itself", path)
-    return PlannedLink(ends[0], ends[1], LinkKind.USER)
+    return PlannedLink(ends[0], ends[1], LinkKind.USER, _row_guess(number, cells, path, sigma))
+
+
+def _row_guess(number: int, cells: list[str], path: Path, sigma: tuple[float, float]) -> Any:
+    """The row's guess after its two scans (None without one)."""
+    from ndt_cli.ndt.register import Guess
+    from ndt_cli.pipeline.guesses import pair_pose
+
+    try:
+        T = pair_pose(cells[2:], path.parent)
+    except ValueError as exc:
+        raise InputError(f"line {number}: {exc}", path) from None
+    return None if T is None else Guess(T, *sigma)
 
 
 def _digits(cell: str) -> bool:

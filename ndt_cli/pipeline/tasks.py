@@ -18,7 +18,8 @@ from ndt_cli.errors import NdtError
 from ndt_cli.io.multiscan import split_spec
 from ndt_cli.ndt.overlap import Sketch, sketch
 from ndt_cli.ndt.prepare import PreparedScan, load_and_prepare
-from ndt_cli.ndt.register import register_prepared
+from ndt_cli.ndt.register import Guess, register_prepared
+from ndt_cli.pipeline.guesses import better
 from ndt_cli.pipeline.links import Link
 from ndt_cli.pipeline.network import LinkKind
 from ndt_cli.pipeline.samples import SliceSample, slice_sample
@@ -28,14 +29,14 @@ from ndt_cli.pipeline.workers import Failure
 @dataclass(frozen=True)
 class LinkJob:
     """Which link to register: its index, the target and source scans (indices), its key, its
-    kind, and a loop closure's guess of T_target_source (scan frames; None for the others)."""
+    kind, and a guess of T_target_source (a :class:`Guess`; None: the search alone)."""
 
     index: int
     target: int
     source: int
     key: str
     kind: LinkKind = LinkKind.ADJACENT
-    guess: np.ndarray | None = None
+    guess: Guess | None = None
 
     @property
     def pair(self) -> tuple[int, int]:
@@ -111,9 +112,12 @@ def summarise_scan(path: Path, cfg: Config, ship: bool) -> ScanSummary | Failure
 
 
 def register_link(job: LinkJob, target: PreparedScan, source: PreparedScan, cfg: Config) -> Link:
-    """Register prepared scan ``source`` onto ``target``."""
+    """Register prepared scan ``source`` onto ``target``: by the search, and with a guess
+    from it too, the better kept (:func:`~ndt_cli.pipeline.guesses.better`)."""
     try:
-        result = register_prepared(target, source, cfg, guess=job.guess)
+        result = register_prepared(target, source, cfg)
+        if job.guess is not None:
+            result = better(result, register_prepared(target, source, cfg, init=job.guess))
     except NdtError as exc:
         return job.failed(str(exc))
     return Link(job.index, job.target, job.source, job.key, result, kind=job.kind)

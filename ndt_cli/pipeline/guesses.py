@@ -1,0 +1,123 @@
+"""Guesses a surveyor gives a campaign: approximate poses of scans (``--init-poses``: GNSS and
+a compass, yesterday's campaign, a placement by hand) and of pairs (``--pairs`` rows with a
+pose), with how far they may be off (``--init-sigma``).
+
+A guess never replaces the search: a link with a guess is registered both ways, from the
+search and from the guess (:class:`~ndt_cli.ndt.register.Guess`: its first cell set by its
+uncertainty), and the result that passes the gate with the higher score at the finest cells is
+kept (:func:`better`). A wrong guess therefore cannot make a link ok that the search alone
+would not; a right one rescues a pair whose search ends elsewhere. Scans with an approximate
+pose are also placed near it: the scans around it are registered to it first.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ndt_cli.core.transforms import pose2d_matrix
+from ndt_cli.errors import ConfigError, InputError
+from ndt_cli.io.matrices import named_rows, read_matrix, rigid_problem
+from ndt_cli.ndt.register import Guess
+from ndt_cli.ndt.result import RegistrationResult
+
+
+def parse_sigma(text: str, option: str = "--init-sigma") -> tuple[float, float]:
+    """``M,DEG`` checked: metres in (0, 1000], degrees in (0, 180]."""
+    try:
+        metres, degrees = (float(v) for v in text.split(","))
+    except ValueError:
+        raise ConfigError(f"{option} must be METRES,DEGREES (e.g. 1,5), got {text!r}") from None
+    if not (0 < metres <= 1000 and 0 < degrees <= 180):
+        raise ConfigError(
+            f"{option}: metres must be in (0, 1000] and degrees in (0, 180], got {text!r}"
+        )
+    return metres, degrees
+
+
+def pose_of(numbers: Sequence[str]) -> np.ndarray | None:
+    """A pose from 16 numbers (a 4x4, row-major) or 4 (x y z m, yaw degrees); None when the
+    fields are neither."""
+    try:
+        values = [float(v) for v in numbers]
+    except ValueError:
+        return None
+    if not all(np.isfinite(values)):
+        return None
+    if len(values) == 16:
+        return np.array(values).reshape(4, 4)
+    if len(values) == 4:
+        return pose2d_matrix(values[0], values[1], np.radians(values[3]), values[2])
+    return None
+
+
+def read_init_poses(path: Path, names: Sequence[str]) -> dict[int, np.ndarray]:
+    """Approximate ``T_world_scan`` per scan: lines ``NAME`` and 16 numbers (a 4x4, as
+    ``poses.txt``) or ``NAME x y z yaw_deg``; NAME a scan's name or campaign index. A line
+    naming no scan, of other numbers, or not rigid is an error naming the line."""
+    lookup = {n: k for k, n in enumerate(names)}
+    out: dict[int, np.ndarray] = {}
+    for number, fields in named_rows(path, "initial poses"):
+        scan = lookup.get(fields[0])
+        if scan is None and fields[0].isascii() and fields[0].isdigit():
+            scan = int(fields[0]) if int(fields[0]) < len(names) else None
+        if scan is None:
+            raise InputError(f"line {number}: no scan named {fields[0]!r}", path)
+        T = pose_of(fields[1:])
+        if T is None:
+            raise InputError(
+                f"line {number}: expected a name and 16 numbers (a 4x4) or x y z yaw_deg", path
+            )
+        problem = rigid_problem(T)
+        if problem:
+            raise InputError(f"line {number}: {problem}", path)
+        out[scan] = T
+    return out
+
+
+def pair_pose(cells: Sequence[str], folder: Path) -> np.ndarray | None:
+    """A pairs-file row's guess of ``T_target_source`` after its two scans: four numbers
+    (x y z m, yaw degrees), or the name of a 4x4 file (relative to the pairs file's folder);
+    None when the row has none. Raises ValueError with the reason when it is neither."""
+    rest = [c for c in cells if c]
+    if not rest:
+        return None
+    if len(rest) == 1:
+        path = Path(rest[0]) if Path(rest[0]).is_absolute() else folder / rest[0]
+        try:
+            return read_matrix(path)
+        except InputError as exc:
+            raise ValueError(str(exc)) from None
+    T = pose_of(rest)
+    if T is None or len(rest) != 4:
+        raise ValueError("a guess is x,y,z,yaw_deg or a 4x4 file")
+    return T
+
+
+def relative(
+    poses: Mapping[int, np.ndarray], target: int, source: int, sigma: tuple[float, float]
+) -> Guess | None:
+    """The guess of ``T_target_source`` two approximate poses give (None unless both have
+    one); each within ``sigma`` (m, degrees), so the pair within sqrt(2) times it."""
+    if target not in poses or source not in poses:
+        return None
+    T = np.linalg.inv(poses[target]) @ poses[source]
+    return Guess(T, sigma[0] * np.sqrt(2.0), min(180.0, sigma[1] * np.sqrt(2.0)))
+
+
+def better(search: RegistrationResult, guessed: RegistrationResult) -> RegistrationResult:
+    """The result kept of a link registered from the search and from a guess: the one the
+    gate calls ok, then the higher NDT score at the finest cells (the search's on a tie)."""
+    if search.ok != guessed.ok:
+        return search if search.ok else guessed
+    return guessed if guessed.score > search.score else search
+
+
+def guess_text(guess: Guess | None) -> str:
+    """The guess as part of a link's identity (its stored result depends on it)."""
+    if guess is None:
+        return ""
+    values = " ".join(f"{v:.6f}" for v in np.asarray(guess.T_target_source).ravel())
+    return f"\nguess {values} sigma {guess.sigma_m:g} {guess.sigma_deg:g}"
