@@ -65,6 +65,7 @@ GATE: dict[str, tuple[float, str, float]] = {
     "quality.min_constraint_ratio_icp": (0.02, "up", 1.0),
     "quality.max_free_space": (0.10, "down", 0.0),
     "quality.max_free_space_around": (0.05, "down", 0.0),
+    "quality.min_kept_evidence": (0.7, "up", 1.0),
 }
 MAX_STARTS = 100_000  # search.yaw_starts times the translation grid
 MAX_LEVELS = 12

@@ -133,6 +133,7 @@ class Sights:
     second: float = float("nan")
     picked: str = ""
     around: float = float("nan")  # the final pose's share around each direction
+    kept_evidence: float = 1.0  # the pose's evidence over the most of any candidate
 
 
 @dataclass(frozen=True)
@@ -181,6 +182,11 @@ def verdict_of(
             f"other scanner saw around them (> {q.max_free_space_around:.1%})"
         )
     notes += [sights.picked] if sights.picked else []
+    if sights.picked and sights.kept_evidence < q.min_kept_evidence:
+        warnings.append(
+            f"the pose kept has {sights.kept_evidence:.0%} of the evidence of the pose the free "
+            f"space refuted (< {q.min_kept_evidence:.0%}): it may be a pose slid along the scene"
+        )
     weak = weak if weak is not None else weak_icp
     if fit.score <= 0.0:
         status = Status.NO_OVERLAP

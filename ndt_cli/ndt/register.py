@@ -287,7 +287,7 @@ def register_prepared(
     after = None if moved is None else measure_fit(gate_map, gate_points, moved, 0.0, kernels)
     second = float(judged.shares[1]) if len(judged.shares) > 1 else float("nan")
     final, around = _final_free_space(target, source, refinement.T, cfg)
-    sights = Sights(final, second, judged.note, around)
+    sights = Sights(final, second, judged.note, around, judged.kept_evidence)
     verdict = verdict_of(fit, converged, refinement, target.level, cfg.quality, sights, rivals)
     per_slice = tuple(int(n) for n in sampler.fine.per_slice(len(source.slices)))
     stages = _Stages(

@@ -48,6 +48,7 @@ class Judged:
     refuted: np.ndarray
     rivals: tuple[int, ...]
     note: str = ""
+    kept_evidence: float = 1.0  # the winner's evidence over the most evidence of any candidate
 
 
 def refuted(shares: np.ndarray, ratio: float, margin: float) -> np.ndarray:
@@ -76,6 +77,7 @@ def judge(
     out = refuted(shares, ratio, margin)
     allowed = np.flatnonzero(~out)
     win = int(allowed[0]) if len(allowed) else 0  # ranked by evidence: the first allowed
+    kept = float(ranked.evidence[win] / max(float(ranked.evidence[0]), 1e-300))
     order = [win, *(k for k in range(len(ranked.poses)) if k != win)]
     ranked = ranked.promote(win) if win else ranked
     shares, out = np.asarray(shares, dtype=float)[order], out[order]
@@ -88,7 +90,7 @@ def judge(
         and distinct(ranked.poses[k], ranked.poses[0])
     )
     note = "" if win == 0 else _promoted(shares[0], float(shares[1]))
-    return Judged(ranked, shares, out, rivals, note)
+    return Judged(ranked, shares, out, rivals, note, kept)
 
 
 def _promoted(kept: float, given_up: float) -> str:
