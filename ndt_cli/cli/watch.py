@@ -204,7 +204,9 @@ def _run(cfg: Config, opts: _Options, screen: Screen) -> int:
             raise
         why = "terminated" if stop.terminated else "interrupted"
     finally:
-        pool.close()
+        _close(pool)
+    if why != "idle":  # stopped: a further Ctrl-C adds nothing to the summary that follows
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
     if field is None:  # stopped before the watch began
         return EXIT_INTERRUPTED
     stopped = field.stopped(why, opts.out)
@@ -214,6 +216,15 @@ def _run(cfg: Config, opts: _Options, screen: Screen) -> int:
         stopped = replace(stopped, world=tuple(closing_lines(field.result)))
     screen.show(stopped)
     return stopped.exit_code
+
+
+def _close(pool: Executor) -> None:
+    """Close the worker pool; a second Ctrl-C while it waits for the workers' tasks makes it
+    kill them instead (see ``WorkerPool.close``), and the summary still follows."""
+    import contextlib
+
+    with contextlib.suppress(KeyboardInterrupt):
+        pool.close()
 
 
 class _Stop:

@@ -164,7 +164,7 @@ class FieldCampaign:
         found = {} if self.result is None else verdicts(self.result, self.stations)
         not_ok = tuple((n, v.label) for n, v in found.items() if v.label != "ok")
         writing = {
-            p: "still being written"
+            p: "not landed yet (changed within the settle time)"
             for p in self.watch.writing()
             if p not in self.waiting and probe(p).kind is not FileKind.NOT_A_SCAN
         }
