@@ -103,6 +103,17 @@ def test_initial_guess_skips_the_search_and_the_cells_coarser_than_its_uncertain
     assert planar_errors(wide.T_target_source, ref)[1] < TRANS_TOL_M
 
 
+def test_a_position_without_a_heading_is_searched_all_round(street):
+    """A control station gives where a scanner stood, not where it looked."""
+    scans, poses = street
+    ref = relative(poses, 1, 2)
+    turned = ref @ pose2d_matrix(0.4, 0.3, np.radians(150.0))
+    result = ndt_cli.register(scans[1], scans[2], Config(), init=Guess(turned, 1.0, 180.0))
+    assert all(level.starts == 24 * 25 for level in result.levels)  # every 15 deg
+    rot, trans = planar_errors(result.T_target_source, ref)
+    assert rot < ROT_TOL_DEG and trans < TRANS_TOL_M
+
+
 def test_a_wrong_guess_ends_right_or_not_ok(street):
     scans, poses = street
     ref = relative(poses, 1, 2)

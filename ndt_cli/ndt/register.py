@@ -94,6 +94,9 @@ class Guess:
     sigma_deg: float = 5.0
 
 
+ALL_ROUND_DEG = 45.0  # a guess this uncertain in heading is searched all round
+
+
 def first_cell(cells: Sequence[float], sigma_m: float) -> float:
     """The cell size (m) a guess within ``sigma_m`` starts at: the smallest configured cell of
     at least twice its uncertainty (restarts at +-1 cell then cover it), the coarsest when none
@@ -109,6 +112,8 @@ def _from_guess(target: PreparedScan, source: PreparedScan, init: Guess, cfg: Co
     cells = cfg.grid.cell_sizes
     p0 = _planar(target, source, np.asarray(init.T_target_source, float))
     turns = [0.0] if init.sigma_deg < 2.0 else [0.0, -init.sigma_deg, init.sigma_deg]
+    if init.sigma_deg >= ALL_ROUND_DEG:  # a position without a heading: every 15 degrees
+        turns = list(np.arange(-180.0, 180.0, 15.0))
     candidates = p0[None, :] + np.radians(np.array(turns))[:, None] * np.array([0.0, 0.0, 1.0])
     schedule = tuple(c for c in cells if c <= first_cell(cells, init.sigma_m))
     return _Start(candidates, [], schedule, (cfg.search.refine_offsets,) * len(schedule))

@@ -38,7 +38,9 @@ from ndt_cli.config.schema import Config
 from ndt_cli.errors import UserInterruptError, caused_by_interrupt
 from ndt_cli.ndt.overlap import CoarseMatch, coarse_match
 from ndt_cli.pipeline import placement
+from ndt_cli.pipeline.by_control import frame_of, station_links
 from ndt_cli.pipeline.control import matched
+from ndt_cli.pipeline.datum import log_unused_controls
 from ndt_cli.pipeline.discovery import (
     HINTS,
     Placed,
@@ -144,6 +146,8 @@ class Campaign:
             self._discover(new)
             self._bridge(new)
             self._consolidate()
+            if self._place_by_stations():
+                self._consolidate()
 
     def result(self) -> ChainResult:
         """Solve the planned network: a pose and a status per scan."""
@@ -163,7 +167,7 @@ class Campaign:
             self.cfg.quality.max_ambiguity,
             self.cfg.quality.trust_bridges,
         )
-        _log_controls(solution)
+        log_unused_controls(solution.datum)
         return ChainResult(
             scans=tuple(self.paths),
             names=names,
@@ -363,6 +367,23 @@ class Campaign:
             joined = [placement.join(p, self.links, self.where) for p in pairs]
             failed = 0 if any(joined) else failed + 1
 
+    def _place_by_stations(self) -> bool:
+        """Scans with a station that no link put in the anchor's group, registered from where
+        their station puts them (:mod:`~ndt_cli.pipeline.by_control`); whether one was."""
+        if not self.net.stations or self.anchor not in self.where:
+            return False
+        found = {c.scan: c.xyz for c in matched(self.net.stations, scan_names(self.paths))}
+        home = self.where[self.anchor].group
+        members = [s for s, p in sorted(self.where.items()) if p.group == home]
+        frame = frame_of({s: found[s] for s in members if s in found}, self.where)
+        lone = [s for s in sorted(found) if s not in members and s not in self.unreadable]
+        if frame is None or not lone:
+            return False
+        for s in lone:
+            self.tasks.register_anew(station_links(s, found[s], frame, self.where, members, PROBES))
+            placement.settle(s, self.links, self.where)
+        return True
+
     def _positions(self) -> dict[int, tuple[np.ndarray, float]]:
         """(x, y) m and horizontal sigma of the scans with a control station; without
         control, of those with an approximate pose (their frames may differ from the
@@ -477,16 +498,3 @@ def _identity(path: Path) -> str:
     """What a scan is known by in link keys: the SHA-256 of its file; a file that cannot be
     read (whose links fail and are never kept) by its path."""
     return file_hash(path) or f"{UNREADABLE}{path}"
-
-
-def _log_controls(solution: NetworkSolution) -> None:
-    """A warning per control station the adjustment did not use, with its misfit."""
-    for fit in () if solution.datum is None else solution.datum.controls:
-        if not fit.used:
-            r = fit.residual
-            misfit = (
-                ""
-                if r is None
-                else " (adjusted - given: {:+.1f} {:+.1f} {:+.1f} cm)".format(*(100 * r))
-            )
-            log.warning("control station %s not used: %s%s", fit.control.name, fit.reason, misfit)

@@ -37,6 +37,7 @@ a zone's edge, where the scale departs 4e-4 from 1).
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from enum import StrEnum
@@ -59,6 +60,8 @@ VERTICAL_SIGMA_DEG = {  # how well each way of finding a scan's vertical finds i
 CHI2_3_999 = 16.266  # chi-square quantile, 3 degrees of freedom, p = 0.999
 OUTSIDE = "its scan is not in the anchor's cluster"
 GEOREFERENCED_M = 10_000.0  # a scan in its scanner's frame stands within its range of it
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -434,3 +437,16 @@ def not_georeferenced(
         why.append(f"{len(outside)} on scans no link ties to the anchor ({', '.join(outside)})")
     why += [f"line {s.line}: {problem}" for s, problem in unmatched(stations, names)]
     return f"{used} of {len(stations)} control station(s) in use, {need} needed: " + "; ".join(why)
+
+
+def log_unused_controls(datum: Datum | None) -> None:
+    """A warning per control station the adjustment did not use, with its misfit."""
+    for fit in () if datum is None else datum.controls:
+        if not fit.used:
+            r = fit.residual
+            misfit = (
+                ""
+                if r is None
+                else " (adjusted - given: {:+.1f} {:+.1f} {:+.1f} cm)".format(*(100 * r))
+            )
+            log.warning("control station %s not used: %s%s", fit.control.name, fit.reason, misfit)

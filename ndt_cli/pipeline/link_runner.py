@@ -100,6 +100,11 @@ class LinkRunner:
         again = [k for k in again if self.links[k.pair].status in marginal]
         self.register_jobs([self._job(PlannedLink(k.source, k.target, k.kind)) for k in again])
 
+    def register_anew(self, planned: Sequence[PlannedLink]) -> None:
+        """Register planned links even when their pair was registered already: with what they
+        add (a guess), the better of the two registrations kept."""
+        self.register_jobs([self._job(k) for k in planned])
+
     def register_jobs(self, jobs: list[LinkJob]) -> None:
         """Run the jobs not finished yet (taken from the store where it has them)."""
         jobs = [j for j in jobs if j.key not in self.finished]
