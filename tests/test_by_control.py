@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ndt_cli.core.transforms import pose2d_matrix
-from ndt_cli.pipeline.by_control import MAX_FRAME_MISFIT, frame_of, station_links
+from ndt_cli.pipeline.by_control import MAX_FRAME_MISFIT, frame_of, home_group, station_links
 from ndt_cli.pipeline.discovery import Placed
 from ndt_cli.pipeline.network import LinkKind
 
@@ -47,3 +47,11 @@ def test_a_lone_scan_is_guessed_where_its_station_puts_it_heading_unknown():
         in_group = where[k.target].T_group_scan @ k.guess.T_target_source
         np.testing.assert_allclose(in_group[:2, 3], truth, atol=1e-6)
         assert k.guess.sigma_deg == 180.0
+
+
+def test_the_home_group_has_the_most_stations_the_anchor_s_on_a_tie():
+    groups = [[0, 1, 2, 3], [4, 5], [6]]
+    assert home_group(groups, {4: 0, 5: 0, 0: 0}, anchor=0) == [4, 5]
+    assert home_group(groups, {4: 0, 0: 0}, anchor=0) == [0, 1, 2, 3]
+    assert home_group(groups, {4: 0, 6: 0}, anchor=6) == [6]
+    assert home_group([], {0: 0}, anchor=0) == []

@@ -103,3 +103,38 @@ def test_ndt_chain_places_the_scan_from_approximate_poses(tmp_path):
         T = np.linalg.inv(_pose(rows[0])) @ _pose(rows[1])  # relative to the first scan
         rot, trans = _errors(T, ref)
         assert rows[1]["status"] == "ok" and rot < ROT_DEG and trans < TRANS_M, (rot, trans)
+
+
+@pytest.mark.slow
+def test_control_stations_place_the_scans_no_link_ties_to_the_anchor(tmp_path):
+    """Three scans 40-50 m apart: the first one's links to the others fail, so those two are ok
+    only in a cluster of their own. With a station on each (2 cm, as GNSS on the scanners
+    gives), the first one is registered from where its station puts it: every scan ok in
+    the control's frame, at the truth."""
+    world = StreetWorld(seed=40, **{**BUSY, "n_scans": 3, "spacing": (40, 50)})
+    _, scans, poses = scan_street(world)
+    files = [tmp_path / f"scan_{k}.laz" for k in range(3)]
+    for path, points in zip(files, scans, strict=True):
+        write(path, points)
+    offset = np.array([500_000.0, 5_400_000.0, 100.0])
+    rows = ["scan,x,y,z,sigma_xy,sigma_z"]
+    for path, T in zip(files, poses, strict=True):
+        rows.append(
+            f"{path.name}," + ",".join(f"{v:.4f}" for v in T[:3, 3] + offset) + ",0.02,0.03"
+        )
+    (tmp_path / "control.csv").write_text("\n".join(rows) + "\n")
+    for control, folder in ((False, "alone"), (True, "control")):
+        extra = ["--control", str(tmp_path / "control.csv")] if control else []
+        out = tmp_path / folder
+        run = _run("chain_app", *map(str, files), "-o", str(out), "-j", "2", "-q", *extra)
+        found = list(csv.DictReader((out / "poses.csv").open()))
+        if not control:
+            assert run.returncode == 1 and {r["cluster"] for r in found[1:]} == {"1"}  # premise
+            continue
+        assert run.returncode == 0, run.stderr
+        for row, T in zip(found, poses, strict=True):
+            truth = T.copy()
+            truth[:3, 3] += offset
+            rot, trans = _errors(_pose(row), truth)
+            assert row["status"] == "ok" and row["cluster"] == "0", row
+            assert rot < ROT_DEG and trans < TRANS_M, (row["file"], rot, trans)

@@ -1,5 +1,5 @@
-"""Control places a scan: a scan with a station that no link put in the anchor's group is
-registered from where its station says it is.
+"""Control places a scan: a scan with a station that no link put in the group of most
+stations (:func:`home_group`) is registered from where its station says it is.
 
 The group's own stations (two at least) give the control frame in the group's frame: a
 horizontal rotation and shift fitted to their placed positions (:func:`frame_of`). The lone
@@ -23,6 +23,17 @@ from ndt_cli.pipeline.network import LinkKind, PlannedLink
 
 MAX_FRAME_MISFIT = 0.5  # m: stations that fit the group's placement worse say nothing here
 SIGMA_M = 1.0  # m: the station's scanner found within a cell of 2 m
+
+
+def home_group(
+    groups: Sequence[Sequence[int]], stations: Mapping[int, object], anchor: int
+) -> list[int]:
+    """The placed group with the most scans that have a station (the anchor's on a tie; empty
+    without one): the group the others are brought to."""
+    if not groups:
+        return []
+    best = max(groups, key=lambda g: (sum(s in stations for s in g), anchor in g))
+    return list(best)
 
 
 def frame_of(

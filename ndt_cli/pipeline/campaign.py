@@ -38,7 +38,7 @@ from ndt_cli.config.schema import Config
 from ndt_cli.errors import UserInterruptError, caused_by_interrupt
 from ndt_cli.ndt.overlap import CoarseMatch, coarse_match
 from ndt_cli.pipeline import placement
-from ndt_cli.pipeline.by_control import frame_of, station_links
+from ndt_cli.pipeline.by_control import frame_of, home_group, station_links
 from ndt_cli.pipeline.control import matched
 from ndt_cli.pipeline.datum import log_unused_controls
 from ndt_cli.pipeline.discovery import (
@@ -368,19 +368,16 @@ class Campaign:
             failed = 0 if any(joined) else failed + 1
 
     def _place_by_stations(self) -> bool:
-        """Scans with a station that no link put in the anchor's group, registered from where
+        """Scans with a station outside the group of most stations, registered from where
         their station puts them (:mod:`~ndt_cli.pipeline.by_control`); whether one was."""
-        if not self.net.stations or self.anchor not in self.where:
-            return False
         found = {c.scan: c.xyz for c in matched(self.net.stations, scan_names(self.paths))}
-        home = self.where[self.anchor].group
-        members = [s for s, p in sorted(self.where.items()) if p.group == home]
-        frame = frame_of({s: found[s] for s in members if s in found}, self.where)
-        lone = [s for s in sorted(found) if s not in members and s not in self.unreadable]
+        home = home_group(placement.groups(self.where), found, self.anchor)
+        frame = frame_of({s: found[s] for s in home if s in found}, self.where)
+        lone = [s for s in sorted(found) if s not in home and s not in self.unreadable]
         if frame is None or not lone:
             return False
         for s in lone:
-            self.tasks.register_anew(station_links(s, found[s], frame, self.where, members, PROBES))
+            self.tasks.register_anew(station_links(s, found[s], frame, self.where, home, PROBES))
             placement.settle(s, self.links, self.where)
         return True
 
