@@ -47,6 +47,7 @@ def test_initial_poses_name_scans_and_bad_lines_are_named(tmp_path):
     cases = {
         "nowhere.laz 0 0 0 0\n": "line 1: no scan named 'nowhere.laz'",
         "scan_00.laz 0 0 0\n": "line 1: expected a name and 16 numbers",
+        "scan_00.laz 1e308 0 0 0\n": "line 1: a coordinate of 1e\\+308 m is no place on earth",
         "scan_00.laz " + " ".join(["2"] * 16) + "\n": "line 1: ",
     }
     for text, needle in cases.items():
@@ -75,6 +76,11 @@ def test_a_pairs_row_may_carry_a_guess(tmp_path):
     with pytest.raises(InputError, match="line 1: a guess is x,y,z,yaw_deg or a 4x4 file"):
         read_pairs(pairs, NAMES)
     assert pair_pose(["", ""], tmp_path) is None
+    with pytest.raises(ValueError, match="more than 10000 m apart"):
+        pair_pose(["1e6", "0", "0", "0"], tmp_path)
+    (tmp_path / "far.txt").write_text("1 0 0 2e4\n0 1 0 0\n0 0 1 0\n0 0 0 1\n")
+    with pytest.raises(ValueError, match="more than 10000 m apart"):
+        pair_pose(["far.txt"], tmp_path)
 
 
 def test_two_approximate_poses_guess_their_pair_within_root_two_sigma():

@@ -23,6 +23,9 @@ from ndt_cli.io.matrices import named_rows, read_matrix, rigid_problem
 from ndt_cli.ndt.register import Guess
 from ndt_cli.ndt.result import RegistrationResult
 
+MAX_COORDINATE_M = 1e8  # m: a projected coordinate is at most tens of millions of metres
+MAX_PAIR_M = 10_000.0  # m: scans farther apart share nothing
+
 
 def parse_sigma(text: str, option: str = "--init-sigma") -> tuple[float, float]:
     """``M,DEG`` checked: metres in (0, 1000], degrees in (0, 180]."""
@@ -73,6 +76,11 @@ def read_init_poses(path: Path, names: Sequence[str]) -> dict[int, np.ndarray]:
         problem = rigid_problem(T)
         if problem:
             raise InputError(f"line {number}: {problem}", path)
+        if np.abs(T[:3, 3]).max() > MAX_COORDINATE_M:
+            far = float(np.abs(T[:3, 3]).max())
+            raise InputError(
+                f"line {number}: a coordinate of {far:.3g} m is no place on earth", path
+            )
         out[scan] = T
     return out
 
@@ -87,12 +95,15 @@ def pair_pose(cells: Sequence[str], folder: Path) -> np.ndarray | None:
     if len(rest) == 1:
         path = Path(rest[0]) if Path(rest[0]).is_absolute() else folder / rest[0]
         try:
-            return read_matrix(path)
+            T = read_matrix(path)
         except InputError as exc:
             raise ValueError(str(exc)) from None
-    T = pose_of(rest)
-    if T is None or len(rest) != 4:
+    else:
+        T = pose_of(rest) if len(rest) == 4 else None
+    if T is None:
         raise ValueError("a guess is x,y,z,yaw_deg or a 4x4 file")
+    if np.abs(T[:3, 3]).max() > MAX_PAIR_M:
+        raise ValueError(f"a guess puts the scans more than {MAX_PAIR_M:g} m apart")
     return T
 
 
