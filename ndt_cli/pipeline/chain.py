@@ -21,7 +21,7 @@ from ndt_cli.pipeline.workers import default_jobs
 
 __all__ = ["ChainResult", "NetworkOptions", "plan_links", "run_chain", "scene_of"]
 
-log = logging.getLogger(__name__)
+progress = logging.getLogger("ndt_cli.progress")  # a stage line, shown as it happens
 LOOKS = 3  # scans looked at in turn for the scene when the first cannot be read
 
 
@@ -44,7 +44,7 @@ def scene_of(cfg: Config, scans: Sequence[str | Path], level: int = logging.INFO
         except NdtError:
             continue
     settled, why = settle_scene(cfg, view)
-    log.log(level, "scene %s", why)
+    progress.log(level, "scene %s", why)
     return settled
 
 
