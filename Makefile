@@ -25,7 +25,7 @@ demo: $(STAMP)
 	@echo "report: ndt_results/chain/report.html (open it in a browser); cloud: ndt_results/street.laz"
 
 test: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q --durations=20
 
 test-fast: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q -m "not slow"
