@@ -15,11 +15,13 @@ from ndt_cli.cli.common import (
     ControlOpt,
     CrsOpt,
     DebugOpt,
+    InitPosesOpt,
     InitSigmaOpt,
     JobsOpt,
     JsonOpt,
     NeighboursOpt,
     OneLineCommand,
+    PairsOpt,
     PrintConfigOpt,
     QuietOpt,
     RadiusOpt,
@@ -109,22 +111,8 @@ def chain(
         ),
     ] = True,
     radius: RadiusOpt = None,
-    pairs: Annotated[
-        Path | None,
-        typer.Option(
-            help="CSV of target,source rows: more pairs to register (scan names); a row may "
-            "add a guess of T_target_source: x,y,z,yaw_deg or a 4x4 file."
-        ),
-    ] = None,
-    init_poses: Annotated[
-        Path | None,
-        typer.Option(
-            "--init-poses",
-            help="Approximate T_world_scan of scans: lines of a name and 16 numbers (as "
-            "poses.txt) or x y z yaw_deg (GNSS and a compass, yesterday's campaign, a "
-            "placement by hand). Links between them are registered from the guess too.",
-        ),
-    ] = None,
+    pairs: PairsOpt = None,
+    init_poses: InitPosesOpt = None,
     init_sigma: InitSigmaOpt = "1,5",
     control: ControlOpt = None,
     crs: CrsOpt = None,
@@ -144,17 +132,10 @@ def chain(
 
         cfg = load_config(config, print_config)
         _check(opts)
+        guesses = {"init_poses": init_poses, "init_sigma": init_sigma}
+        network = {"neighbours": neighbours, "adjust": adjust, "radius": radius, "pairs": pairs}
         inputs = chain_inputs(
-            scans or [],
-            anchor=anchor,
-            neighbours=neighbours,
-            adjust=adjust,
-            radius=radius,
-            pairs=pairs,
-            control=control,
-            crs=crs,
-            init_poses=init_poses,
-            init_sigma=init_sigma,
+            scans or [], anchor=anchor, control=control, crs=crs, **network, **guesses
         )
         check_out(out, *inputs.paths, pairs, config, control, init_poses)
         with output_lock(out, "ndt-chain"):

@@ -70,6 +70,22 @@ RadiusOpt = Annotated[
         show_default="2.2 x the median distance between nearest scans",
     ),
 ]
+PairsOpt = Annotated[
+    Path | None,
+    typer.Option(
+        help="CSV of target,source rows: more pairs to register (scan names); a row may add a "
+        "guess of T_target_source: x,y,z,yaw_deg or a 4x4 file."
+    ),
+]
+InitPosesOpt = Annotated[
+    Path | None,
+    typer.Option(
+        "--init-poses",
+        help="Approximate T_world_scan of scans: lines of a name and 16 numbers (as poses.txt) "
+        "or x y z yaw_deg (GNSS and a compass, yesterday's campaign, a placement by hand). Links "
+        "between them are registered from the guess too.",
+    ),
+]
 InitSigmaOpt = Annotated[
     str,
     typer.Option(

@@ -126,6 +126,7 @@ class Campaign:
         self.finished = self.tasks.finished
         self.reused = self.tasks.reused
         self.coarse: dict[Pair, CoarseMatch] = {}
+        self.by_station: set[Pair] = set()  # pairs registered from a station's position once
         self.plan: set[Pair] = set()
         self.where: dict[int, Placed] = {}  # where each placed scan is, roughly
         self.radius = float("nan")
@@ -369,22 +370,26 @@ class Campaign:
 
     def _place_by_stations(self) -> bool:
         """Scans with a station outside the group of most stations, registered from where
-        their station puts them (:mod:`~ndt_cli.pipeline.by_control`); whether one was."""
+        their station puts them (:mod:`~ndt_cli.pipeline.by_control`), each pair once (a frame
+        refitted as scans land gives another guess); whether one was placed."""
         found = {c.scan: c.xyz for c in matched(self.net.stations, scan_names(self.paths))}
         home = home_group(placement.groups(self.where), found, self.anchor)
         frame = frame_of({s: found[s] for s in home if s in found}, self.where)
         lone = [s for s in sorted(found) if s not in home and s not in self.unreadable]
         if frame is None or not lone:
             return False
+        placed = False
         for s in lone:
-            self.tasks.register_anew(station_links(s, found[s], frame, self.where, home, PROBES))
-            placement.settle(s, self.links, self.where)
-        return True
+            planned = station_links(s, found[s], frame, self.where, home, PROBES)
+            new = [k for k in planned if k.pair not in self.by_station]
+            self.by_station |= {k.pair for k in new}
+            self.tasks.register_anew(new)
+            placed |= bool(new) and placement.settle(s, self.links, self.where)
+        return placed
 
     def _positions(self) -> dict[int, tuple[np.ndarray, float]]:
         """(x, y) m and horizontal sigma of the scans with a control station; without
-        control, of those with an approximate pose (their frames may differ from the
-        control's)."""
+        control, of those with an approximate pose (in a frame of its own)."""
         if self.net.stations:
             found = matched(self.net.stations, scan_names(self.paths))
             return {c.scan: (c.xyz[:2], c.sigma_xy) for c in found}
@@ -436,7 +441,8 @@ class Campaign:
             chain = {k.pair for k in classic_chain(len(self.paths), self.unreadable)}
             pairs = chain | user
         else:
-            lonely = {p for p in self.links if not any(self._has_ok_link(i) for i in p)}
+            linked = {i for p, k in self.links.items() if k.ok for i in p}  # scans with an ok link
+            lonely = {p for p in self.links if not set(p) & linked}
             pairs = self.plan | user | lonely
         chosen = sorted(p for p in pairs if p in self.links)
         return [
@@ -464,9 +470,6 @@ class Campaign:
     def _register(self, planned: Sequence[PlannedLink], both_ways: bool = False) -> None:
         """Register the planned links not registered yet (see :meth:`LinkRunner.register`)."""
         self.tasks.register(planned, both_ways, classic=self.net.classic)
-
-    def _has_ok_link(self, i: int) -> bool:
-        return any(k.ok for p, k in self.links.items() if i in p)
 
     def _match(self, a: int, b: int) -> CoarseMatch:
         """The coarse match of scan ``b`` on scan ``a`` (cached per pair)."""
