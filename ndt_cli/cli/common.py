@@ -306,6 +306,14 @@ def stop_on_sigterm() -> None:
     signal.signal(signal.SIGTERM, _interrupt)
 
 
+def ignore_stop_signals() -> None:
+    """Stopped: a second Ctrl-C or SIGTERM adds nothing. Ignored rather than left to Python's
+    handlers, which the interpreter resets to the default as it exits (a signal then would
+    kill the process, exit -2 instead of 130)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+
+
 def _interrupt(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 
@@ -318,13 +326,15 @@ def user_errors(prog: str, debug: bool, interrupted: str = "interrupted") -> Ite
     try:
         yield
     except NdtError as exc:
+        if isinstance(exc, UserInterruptError):
+            ignore_stop_signals()
         if debug:
             raise
         raise fail(exc, prog) from None
     except BaseException as exc:
         if not caused_by_interrupt(exc):
             raise
-        signal.signal(signal.SIGINT, signal.SIG_IGN)  # stopped: a second Ctrl-C adds nothing
+        ignore_stop_signals()
         raise fail(UserInterruptError(interrupted), prog) from None
     flush_messages()
 

@@ -24,6 +24,7 @@ from ndt_cli.cli.common import (
     VersionOpt,
     check_out,
     command_line,
+    ignore_stop_signals,
     load_config,
     new_app,
     setup_logging,
@@ -206,7 +207,7 @@ def _run(cfg: Config, opts: _Options, screen: Screen) -> int:
     finally:
         _close(pool)
     if why != "idle":  # stopped: a further Ctrl-C adds nothing to the summary that follows
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        ignore_stop_signals()
     if field is None:  # stopped before the watch began
         return EXIT_INTERRUPTED
     stopped = field.stopped(why, opts.out)

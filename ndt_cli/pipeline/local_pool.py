@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import logging
 import multiprocessing
@@ -9,7 +10,7 @@ import os
 import signal
 import sys
 import threading
-from collections.abc import Callable, Hashable
+from collections.abc import Callable, Hashable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
@@ -31,6 +32,21 @@ log = logging.getLogger(__name__)
 _busy: Counter | None = None  # in a worker: the pool's count of workers running a task
 _PR_SET_PDEATHSIG = 1  # prctl option: the signal this process gets when its parent dies
 _abandoned = threading.Event()  # set once workers were killed instead of being waited for
+_STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+
+
+@contextlib.contextmanager
+def _stop_signals_held() -> Iterator[None]:
+    """Hold Ctrl-C and SIGTERM back in this thread while worker processes may start (a pool
+    starts them in ``submit``). A worker inherits the held mask, so a signal to the process
+    group that lands before its initializer ignores it waits and is then dropped, instead of
+    raising KeyboardInterrupt in its start-up (a traceback on the command's stderr). The
+    command itself gets the signal as soon as the block ends."""
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 def _init_worker(
@@ -41,6 +57,7 @@ def _init_worker(
     # workers finish their tasks; the parent's own handlers are not the workers'
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)  # held while it started
     _die_with(parent)
     if busy is None:
         set_threads(threads or 1)
@@ -145,7 +162,8 @@ class WorkerPool:
         it starts threads of its own (a progress display), so that they can be forked, and
         they start while it does other work."""
         if self._pool is None:
-            self._new(self.jobs).submit(os.getpid)
+            with _stop_signals_held():
+                self._new(self.jobs).submit(os.getpid)
 
     def run(self, tasks: dict[Hashable, Task], then: Then | None = None) -> Results:
         """Yield (key, result) as tasks finish; a task that fails yields a :class:`Failure`.
@@ -222,7 +240,8 @@ def _collect(
 
     def submit(key: Hashable) -> None:
         try:
-            pending[pool.submit(_counted, tasks[key])] = key
+            with _stop_signals_held():
+                pending[pool.submit(_counted, tasks[key])] = key
         except BrokenProcessPool:
             broken.append(key)
 
