@@ -24,8 +24,10 @@ demo: $(STAMP)
 	$(BIN)/ndt-export ndt_results/chain --out ndt_results/street.laz
 	@echo "report: ndt_results/chain/report.html (open it in a browser); cloud: ndt_results/street.laz"
 
+# two test processes, a test file each at a time (its module fixtures made once): many tests
+# wait on processes they start, so two share the cores well even on a machine with two
 test: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q --durations=20
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q -n 2 --dist loadfile --durations=20
 
 test-fast: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q -m "not slow"
