@@ -104,10 +104,13 @@ def _run(
 
     from ndt_cli.ndt.register import Guess
     from ndt_cli.ndt.register import register as run  # the kernels: only once inputs are good
+    from ndt_cli.pipeline.scans import hash_ahead
     from ndt_cli.report.register_outputs import write_register_outputs
 
     guess = None if T_init is None else Guess(T_init, *sigma)
+    hashing = hash_ahead([target, source])  # the outputs name the files by their SHA-256
     result = run(target, source, cfg, init=guess)
+    hashing.join()
     write_register_outputs(out, result, cfg, command_line())
     return result
 

@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ndt_cli.core.records import rows_within
+
 INT32 = (-(2**31), 2**31 - 1)
 
 
@@ -100,15 +102,7 @@ def zero_rows(block: Block) -> np.ndarray:
     if block.scale is None or block.offset is None:
         raise ValueError("zero_rows needs a block of integers")
     spans = [zero_interval(float(block.scale[k]), float(block.offset[k])) for k in range(3)]
-    mask = np.zeros(len(block), bool)
     if any(s is None for s in spans) or len(block) == 0:
-        return mask
-    first = block.values[:, 0]
-    lo, hi = spans[0]  # type: ignore[misc]
-    cand = np.flatnonzero((first >= lo) & (first <= hi))
-    for k in (1, 2):
-        lo, hi = spans[k]  # type: ignore[misc]
-        v = block.values[cand, k]
-        cand = cand[(v >= lo) & (v <= hi)]
-    mask[cand] = True
-    return mask
+        return np.zeros(len(block), bool)
+    lo, hi = zip(*spans, strict=True)  # type: ignore[misc]
+    return rows_within(block.values, np.array(lo), np.array(hi))

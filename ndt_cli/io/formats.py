@@ -20,6 +20,7 @@ import laspy
 import numpy as np
 import plyfile
 
+from ndt_cli.core.records import record_bytes, xyz_integers
 from ndt_cli.errors import InputError
 from ndt_cli.io import records_formats as record_io
 from ndt_cli.io.blocks import Block
@@ -187,11 +188,9 @@ XYZ = laspy.DecompressionSelection.xy_returns_channel() | laspy.DecompressionSel
 
 
 def _integers(records: np.ndarray) -> np.ndarray:
-    """(m,3) int32 X, Y, Z of LAS point records."""
-    out = np.empty((len(records), 3), np.int32)
-    for k, name in enumerate("XYZ"):
-        out[:, k] = records[name]
-    return out
+    """(m,3) int32 X, Y, Z of LAS point records (mapped or decompressed), read in one pass
+    over the records (:func:`ndt_cli.core.records.xyz_integers`)."""
+    return xyz_integers(record_bytes(records))
 
 
 SCALE_BLOCK = 65_536  # records scaled at a time: the block's columns stay in the CPU's cache

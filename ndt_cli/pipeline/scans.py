@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import re
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -72,6 +73,17 @@ def file_hash(path: Path, *, reuse: bool = True) -> str | None:
         return None
     _known[key] = (stamp, h.hexdigest())
     return h.hexdigest()
+
+
+def hash_ahead(paths: Sequence[Path]) -> threading.Thread:
+    """Hash ``paths`` (:func:`file_hash`) in a helper thread, beside the work that reads them:
+    SHA-256 releases the GIL, and a 17 M-point LAS pair takes about half a second to hash.
+    Join the thread before the hashes are needed; :func:`file_hash` then finds them."""
+    thread = threading.Thread(
+        target=lambda: [file_hash(Path(p)) for p in paths], name="hash-ahead", daemon=True
+    )
+    thread.start()
+    return thread
 
 
 def scan_names(paths: Sequence[Path]) -> list[str]:
