@@ -76,9 +76,10 @@ class InputConfig:
     )
     memory_mb: int = key(
         1000,
-        "a scan whose coordinates take at most this many MB (12 bytes a point in LAS and LAZ, "
-        "24 in E57 and others) is read once and held while it is prepared; a larger file "
-        "is read twice, chunk_points at a time, so memory stays bounded whatever its size",
+        "a scan whose coordinates take at most this many MB (12 bytes a point in LAZ, 24 in "
+        "E57 and others) is read once and held while it is prepared; a larger LAZ or E57 file "
+        "is read twice, chunk_points at a time, so memory stays bounded whatever its size (a "
+        "LAS file above chunk_points always is: it is mapped, and read again without decoding)",
     )
 
 

@@ -24,6 +24,7 @@ log = logging.getLogger(__name__)
 
 INT_BYTES, FLOAT_BYTES = 12, 24  # held per point: a LAS file's integers, float64 coordinates
 HELD_SUFFIXES = (".las", ".laz")  # formats whose blocks keep their integers
+MAPPED_SUFFIXES = (".las",)  # read again from the page cache with no decoding: streamed twice
 
 
 def budget(inp: InputConfig) -> int:
@@ -114,13 +115,13 @@ def _held_bytes(path: Path, records: int, inp: InputConfig) -> int:
 class ScanChunks:
     """A scan as a re-iterable sequence of blocks of points in the scanner frame.
 
-    A file is read once and its blocks held (a LAS or LAZ file's integers: 12 bytes a point),
-    unless its coordinates would take more than ``input.memory_mb``: then it is streamed twice,
+    A file is read once and its blocks held (a LAZ file's integers: 12 bytes a point), unless
+    its coordinates would take more than ``input.memory_mb``: then it is streamed twice,
     ``input.chunk_points`` at a time, and memory grows with the chunk and the points kept, not
-    with the file. (An uncompressed LAS file is held too: reading it again, even from the page
-    cache, costs a second copy of every record's coordinates.) Arrays are one block.
-    ``n_points`` is the count the ground sample's stride is taken from: the count the file's
-    header announces when the file is streamed or holds more
+    with the file. An uncompressed LAS file of more than ``input.chunk_points`` points is
+    streamed twice too: it is mapped from the file, and read again from the page cache without
+    decoding. Arrays are one block. ``n_points`` is the count the ground sample's stride is
+    taken from: the count the file's header announces when the file is streamed or holds more
     than ``input.chunk_points`` points, else the usable points.
     """
 
@@ -140,7 +141,8 @@ class ScanChunks:
         announced = io.count(path)  # LAS/LAZ
         large = announced is not None and announced > inp.chunk_points
         records = announced if announced is not None else io.record_count(path)  # E57 too
-        if records is not None and _held_bytes(path, records, inp) > budget(inp):
+        mapped = large and path.suffix.lower() in MAPPED_SUFFIXES
+        if mapped or (records is not None and _held_bytes(path, records, inp) > budget(inp)):
             return cls(lambda: _streamed(path, inp), records, path, held=False)  # type: ignore[arg-type]
         blocks = list(_streamed(path, inp))
         n = sum(len(b) for b in blocks)
