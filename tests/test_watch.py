@@ -10,6 +10,7 @@ import io
 import json
 import re
 import signal
+import struct
 import time
 from pathlib import Path
 
@@ -22,6 +23,7 @@ from typer.testing import CliRunner
 from ndt_cli.cli import chain_app, watch_app
 from ndt_cli.core.transforms import transform_errors
 from ndt_cli.io.matrices import read_pose_list
+from ndt_cli.pipeline.closed_files import ClosedFiles
 from ndt_cli.pipeline.field_events import (
     EventKind,
     FileNote,
@@ -154,8 +156,9 @@ def test_a_file_lands_once_it_stops_changing(tmp_path):
     assert first.settled == () and first.busy and watch.writing() == [tmp_path / "a.laz"]
     assert watch.look(now=0.5).settled == ()  # not settled yet
     with open(tmp_path / "a.laz", "ab") as fh:
-        fh.write(b"5678")  # still being written
-    assert watch.look(now=1.2).settled == ()
+        fh.write(b"5678")  # still being written: open
+        fh.flush()
+        assert watch.look(now=1.2).settled == ()
     landed = watch.look(now=2.3).settled
     assert [s.path.name for s in landed] == ["a.laz"]
     assert np.isclose(landed[0].mtime, (tmp_path / "a.laz").stat().st_mtime)
@@ -169,9 +172,85 @@ def test_a_file_that_changes_after_landing_is_handed_out_again(tmp_path):
     watch.look(now=0.0)
     assert len(watch.look(now=1.0).settled) == 1
     assert watch.look(now=2.0).settled == ()
-    _touch(tmp_path / "a.laz", b"a whole new content")  # a copy over it
-    assert watch.look(now=3.0).settled == ()
+    with open(tmp_path / "a.laz", "wb") as fh:  # a copy over it, in progress
+        fh.write(b"a whole new")
+        fh.flush()
+        assert watch.look(now=3.0).settled == ()
+        fh.write(b" content")
     assert [s.path.name for s in watch.look(now=4.0).settled] == ["a.laz"]
+
+
+needs_inotify = pytest.mark.skipif(
+    not ClosedFiles(Path(__file__).parent).active, reason="no inotify on this system"
+)
+
+
+@needs_inotify
+def test_a_file_its_writer_closed_is_handed_out_at_the_next_look(tmp_path):
+    watch = FolderWatch(tmp_path, (".laz",), settle_s=100.0)  # never settled by time here
+    watch.look(now=0.0)  # the watch begins
+    with open(tmp_path / "a.laz", "wb") as fh:
+        fh.write(b"1234")
+        fh.flush()
+        assert watch.look(now=0.1).settled == ()  # open: still being written
+    assert [s.path.name for s in watch.look(now=0.2).settled] == ["a.laz"]
+    with open(tmp_path / "a.laz", "ab") as fh:  # written again after its close: not finished
+        fh.write(b"5678")
+        fh.flush()
+        assert watch.look(now=0.3).settled == ()
+    assert [s.path.name for s in watch.look(now=0.4).settled] == ["a.laz"]  # closed again
+
+
+@needs_inotify
+def test_a_file_renamed_in_whole_is_handed_out_at_the_next_look(tmp_path):
+    watch = FolderWatch(tmp_path, (".laz",), settle_s=100.0)
+    watch.look(now=0.0)
+    part = tmp_path / "b.laz.part"
+    _touch(part, b"whole")  # a temporary name: never looked at
+    assert watch.look(now=0.1).settled == ()
+    part.rename(tmp_path / "b.laz")
+    assert [s.path.name for s in watch.look(now=0.2).settled] == ["b.laz"]
+
+
+@needs_inotify
+def test_a_file_changed_after_its_close_waits_for_the_settle_time(tmp_path):
+    watch = FolderWatch(tmp_path, (".laz",), settle_s=0.5)
+    watch.look(now=0.0)
+    _touch(tmp_path / "c.laz", b"1234")  # closed ...
+    with open(tmp_path / "c.laz", "ab") as fh:  # ... and opened again by another writer
+        fh.write(b"56")
+        fh.flush()
+        assert watch.look(now=0.1).settled == ()  # the state after the close is not finished
+        assert watch.look(now=0.4).settled == ()
+        assert [s.path.name for s in watch.look(now=0.7).settled] == ["c.laz"]  # by time
+
+
+def test_finished_names_come_from_the_last_event_a_writer_caused():
+    from ndt_cli.pipeline.closed_files import (
+        IN_CLOSE_WRITE,
+        IN_MODIFY,
+        IN_MOVED_TO,
+        IN_Q_OVERFLOW,
+        _parse,
+    )
+
+    def event(mask: int, name: bytes) -> bytes:
+        padded = name + b"\0" * (16 - len(name) % 16) if name else b""
+        return struct.pack("iIII", 1, mask, 0, len(padded)) + padded
+
+    def finished(*events: bytes) -> set[str]:
+        last: dict[str, bool] = {}
+        overflow = _parse(b"".join(events), last)
+        return {"overflow"} if overflow else {n for n, done in last.items() if done}
+
+    closed, moved = event(IN_CLOSE_WRITE, b"a.laz"), event(IN_MOVED_TO, b"b.las")
+    assert finished(event(IN_MODIFY, b"a.laz"), closed, moved) == {"a.laz", "b.las"}
+    assert finished(closed, event(IN_MODIFY, b"a.laz")) == set()  # written again since
+    assert finished(event(0x100, b"new.laz")) == set()  # IN_CREATE: not finished
+    assert finished(event(IN_CLOSE_WRITE, "é.laz".encode())) == {"é.laz"}
+    assert finished(closed, event(IN_Q_OVERFLOW, b"")) == {"overflow"}
+    assert not ClosedFiles(Path("/no/such/folder")).active
+    assert ClosedFiles(Path("/no/such/folder")).names() == set()
 
 
 def test_a_file_asked_again_is_handed_out_once_more_only(tmp_path):
@@ -202,12 +281,12 @@ def test_empty_files_and_files_that_never_settle_hold_no_idle_watch(tmp_path):
     watch = FolderWatch(tmp_path, (".laz", ".txt"), settle_s=0.5, hold_s=3.0)
     _touch(tmp_path / "empty.laz", b"")
     assert not watch.look(now=0.0).busy  # an empty file is not looked at
-    log = tmp_path / "log.txt"
     busy = []
-    for k in range(40):  # appended every 0.2 s, never settled: busy for hold_s only
-        with open(log, "a") as fh:
-            fh.write(f"line {k}\n")
-        busy.append(watch.look(now=0.2 * k + 0.01).busy)
+    with open(tmp_path / "log.txt", "a") as log:  # a log kept open and appended every 0.2 s
+        for k in range(40):  # never settled: busy for hold_s only
+            log.write(f"line {k}\n")
+            log.flush()
+            busy.append(watch.look(now=0.2 * k + 0.01).busy)
     assert all(busy[:15]) and not any(busy[16:])
 
 
@@ -218,8 +297,9 @@ def test_a_file_left_alone_keeps_nobody_busy(tmp_path):
     assert len(watch.look(now=1.0).settled) == 1
     watch.leave_alone(tmp_path / "notes.txt")
     _touch(tmp_path / "notes.txt", b"hello again")
-    assert not watch.look(now=2.0).busy
-    assert len(watch.look(now=3.0).settled) == 1  # still looked at when it settles
+    second = watch.look(now=2.0)  # settled now where the system tells that it was closed
+    assert not second.busy
+    assert len(second.settled + watch.look(now=3.0).settled) == 1  # still looked at
 
 
 def test_a_folder_that_cannot_be_read_is_told_apart_from_an_empty_one(tmp_path):

@@ -2,9 +2,11 @@
 settled (is no longer being written).
 
 A file has *settled* when its size, modification and change times and inode have not changed
-for ``settle_s`` seconds (a scanner or a copy writing it slowly in place), or it was renamed in
-whole. A file is handed out (:attr:`Look.settled`) once per state it settles in: again when it
-changes and settles again (a copy over it, a permission fixed), or once more when asked
+for ``settle_s`` seconds (a scanner or a copy writing it slowly in place), or when the kernel
+reported it closed after writing or renamed in whole since the last look and it has not changed
+since (:mod:`ndt_cli.pipeline.closed_files`: at once, where the system tells). A file is
+handed out (:attr:`Look.settled`) once per state it settles in: again when it changes and
+settles again (a copy over it, a permission fixed), or once more when asked
 (:meth:`FolderWatch.again`: a file that could not be read is looked at once more after the
 settle time). Hidden files, the temporary names of copies (``.part``, ``.tmp``,
 ``.crdownload``), other suffixes and the files given in ``skip`` (the run's control file) are
@@ -25,6 +27,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from ndt_cli.pipeline.closed_files import ClosedFiles
 from ndt_cli.pipeline.scans import natural_key
 
 SETTLE_S = 0.5  # s a file's size and times must stay the same before it counts as complete
@@ -77,6 +80,7 @@ class _File:
     retry: Signature | None = None  # the state it is handed out once more in
     retried: Signature | None = None
     missing: int = 0  # looks in a row it was not found
+    finished: Signature | None = None  # the state its writer closed it (or renamed it) in
 
 
 class FolderWatch:
@@ -95,10 +99,12 @@ class FolderWatch:
         self.hold_s = hold_s
         self.skip = {_real(p) for p in skip}
         self.files: dict[Path, _File] = {}
+        self.closed: ClosedFiles | None = None  # made once the folder is there
 
     def look(self, now: float | None = None) -> Look:
         """What settled and what went since the last look (see the module docstring)."""
         now = time.monotonic() if now is None else now
+        finished = self._finished()  # before the files' states: those come after the event
         listed = self._listing()
         if listed is None:
             return Look(present=False)
@@ -106,7 +112,7 @@ class FolderWatch:
         for path in listed:
             sig = signature(path)
             if sig is not None:
-                state, found = self._update(path, sig, now)
+                state, found = self._update(path, sig, now, path.name in finished)
                 busy |= state
                 settled += [Settled(path, sig, sig[1] / 1e9, now)] if found else []
         gone = self._gone(set(listed))
@@ -125,6 +131,7 @@ class FolderWatch:
         if f is not None and f.retried != f.signature:
             f.retry = f.signature
             f.since = time.monotonic() if now is None else now
+            f.finished = None  # once more after the settle time, not at the next look
 
     def writing(self) -> list[Path]:
         """Files with bytes, not left alone, not handed out in their present state: being
@@ -151,20 +158,32 @@ class FolderWatch:
             and _real(p) not in self.skip
         ]
 
-    def _update(self, path: Path, sig: Signature, now: float) -> tuple[bool, bool]:
-        """Note the file's state: (whether it keeps the watch busy, whether it settled)."""
+    def _finished(self) -> set[str]:
+        """Names of the files closed after writing or renamed in since the last look."""
+        if self.closed is None and self.folder.is_dir():
+            self.closed = ClosedFiles(self.folder)
+        return set() if self.closed is None else self.closed.names()
+
+    def _update(
+        self, path: Path, sig: Signature, now: float, finished: bool = False
+    ) -> tuple[bool, bool]:
+        """Note the file's state (``finished``: its writer closed or renamed it since the last
+        look): (whether it keeps the watch busy, whether it settled)."""
         f = self.files.get(path)
         if f is None or f.signature != sig:
             quiet = f is not None and f.quiet
             handed = None if f is None else f.handed
             streak = f is not None and f.handed != f.signature and now - f.since < self.settle_s
             began = f.began if f is not None and streak else now
-            self.files[path] = _File(sig, now, began, handed, quiet)
-            return self._holds(self.files[path], now), False
+            f = self.files[path] = _File(sig, now, began, handed, quiet)
+            if not finished:
+                return self._holds(f, now), False
         f.missing = 0
+        if finished:
+            f.finished = sig
         if f.signature[0] == 0 and f.handed is None:
             return False, False  # empty, never handed out: not looked at
-        settling = now - f.since < self.settle_s
+        settling = now - f.since < self.settle_s and f.finished != sig
         if f.handed == sig and f.retry != sig:
             return False, False
         if settling:
