@@ -38,7 +38,7 @@ def test_xyz_of_every_point_format_equals_laspy_fields_and_the_twin(point_format
     assert got.dtype == np.int32 and (got < 0).any() and (got > 2**30).any()  # both signs met
 
 
-def test_xyz_of_a_strided_memory_map_equals_the_file(tmp_path):
+def test_xyz_of_an_unaligned_memory_map_equals_the_file(tmp_path):
     records = _records(6, 20_000, 0, 1)
     path = tmp_path / "records.bin"
     path.write_bytes(b"\x00" * 7 + records.tobytes())  # an odd offset: unaligned integers

@@ -225,9 +225,39 @@ def test_a_file_changed_after_its_close_waits_for_the_settle_time(tmp_path):
         assert [s.path.name for s in watch.look(now=0.7).settled] == ["c.laz"]  # by time
 
 
+@needs_inotify
+def test_a_folder_made_again_is_watched_again(tmp_path):
+    folder = tmp_path / "card"
+    folder.mkdir()
+    watch = FolderWatch(folder, (".laz",), settle_s=100.0)
+    watch.look(now=0.0)
+    folder.rmdir()  # the card taken out ...
+    assert not watch.look(now=0.1).present
+    folder.mkdir()  # ... and in again
+    watch.look(now=0.2)
+    _touch(folder / "a.laz", b"1234")
+    assert [s.path.name for s in watch.look(now=0.3).settled] == ["a.laz"]
+
+
+def test_without_inotify_a_closed_file_waits_for_the_settle_time(tmp_path, monkeypatch):
+    from ndt_cli.pipeline import closed_files
+
+    monkeypatch.setattr(closed_files, "_libc", lambda: None)
+    watch = FolderWatch(tmp_path, (".laz",), settle_s=0.5)
+    watch.look(now=0.0)
+    _touch(tmp_path / "a.laz", b"1234")  # closed, renamed or not: the system tells nothing
+    _touch(tmp_path / "b.laz.part", b"5678")
+    (tmp_path / "b.laz.part").rename(tmp_path / "b.laz")
+    assert watch.look(now=0.1).settled == ()
+    assert watch.look(now=0.4).settled == ()
+    names = [s.path.name for s in watch.look(now=0.7).settled]
+    assert sorted(names) == ["a.laz", "b.laz"]
+
+
 def test_finished_names_come_from_the_last_event_a_writer_caused():
     from ndt_cli.pipeline.closed_files import (
         IN_CLOSE_WRITE,
+        IN_IGNORED,
         IN_MODIFY,
         IN_MOVED_TO,
         IN_Q_OVERFLOW,
@@ -249,8 +279,9 @@ def test_finished_names_come_from_the_last_event_a_writer_caused():
     assert finished(event(0x100, b"new.laz")) == set()  # IN_CREATE: not finished
     assert finished(event(IN_CLOSE_WRITE, "é.laz".encode())) == {"é.laz"}
     assert finished(closed, event(IN_Q_OVERFLOW, b"")) == {"overflow"}
+    assert finished(closed, event(IN_IGNORED, b"")) == {"overflow"}  # the folder went
     assert not ClosedFiles(Path("/no/such/folder")).active
-    assert ClosedFiles(Path("/no/such/folder")).names() == set()
+    assert ClosedFiles(Path("/no/such/folder")).events() == {}
 
 
 def test_a_file_asked_again_is_handed_out_once_more_only(tmp_path):

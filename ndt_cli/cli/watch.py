@@ -192,11 +192,11 @@ def _run(cfg: Config, opts: _Options, screen: Screen) -> int:
     from ndt_cli.pipeline.executors import ExecutorKind, make_executor
 
     pool = make_executor(ExecutorKind.LOCAL, opts.jobs)
-    pool.start()  # before this process starts threads of its own
     stop = _Stop()
-    signal.signal(signal.SIGTERM, stop.terminate)  # after the workers started: theirs stays
     field, why = None, "idle"
     try:
+        pool.start()  # before this process starts threads of its own
+        signal.signal(signal.SIGTERM, stop.terminate)  # after the workers started: theirs stays
         field = _field(cfg, opts, pool)
         screen.show(_started(opts, pool))
         _loop(field, opts, screen)

@@ -37,16 +37,28 @@ _STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 
 @contextlib.contextmanager
 def _stop_signals_held() -> Iterator[None]:
-    """Hold Ctrl-C and SIGTERM back in this thread while worker processes may start (a pool
-    starts them in ``submit``). A worker inherits the held mask, so a signal to the process
-    group that lands before its initializer ignores it waits and is then dropped, instead of
-    raising KeyboardInterrupt in its start-up (a traceback on the command's stderr). The
-    command itself gets the signal as soon as the block ends."""
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+    """Hold Ctrl-C and SIGTERM back while worker processes may start (a pool starts them in
+    ``submit``): blocked in this thread, whose mask a worker inherits, and, in the main
+    thread, noted by a handler of their own rather than raised (another thread of the process
+    may receive them). A signal to the process group that lands before a worker's initializer
+    ignores it then waits in the worker and is dropped, instead of raising KeyboardInterrupt
+    in its start-up (a traceback on the command's stderr, or a worker the pool never
+    recorded); the command gets it once the workers are started."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    caught: list[int] = []
+    main = threading.current_thread() is threading.main_thread()
+    old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+    old = {s: signal.signal(s, lambda n, _: caught.append(n)) for s in _STOP_SIGNALS if main}
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        for s, handler in old.items():
+            signal.signal(s, handler)
+        signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
+        for s in dict.fromkeys(caught):
+            signal.raise_signal(s)
 
 
 def _init_worker(
@@ -57,7 +69,8 @@ def _init_worker(
     # workers finish their tasks; the parent's own handlers are not the workers'
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)  # held while it started
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)  # held while it started
     _die_with(parent)
     if busy is None:
         set_threads(threads or 1)

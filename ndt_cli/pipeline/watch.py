@@ -100,19 +100,22 @@ class FolderWatch:
         self.skip = {_real(p) for p in skip}
         self.files: dict[Path, _File] = {}
         self.closed: ClosedFiles | None = None  # made once the folder is there
+        self.carried: dict[str, bool] = {}  # events read after the last look's states
 
     def look(self, now: float | None = None) -> Look:
         """What settled and what went since the last look (see the module docstring)."""
         now = time.monotonic() if now is None else now
-        finished = self._finished()  # before the files' states: those come after the event
+        before = self._events()  # the writers' events, then the files' states, then again:
         listed = self._listing()
         if listed is None:
             return Look(present=False)
+        states = [(path, signature(path)) for path in listed]
+        self.carried = self._events()  # a file written or closed meanwhile waits a look
         settled, busy = [], False
-        for path in listed:
-            sig = signature(path)
+        for path, sig in states:
             if sig is not None:
-                state, found = self._update(path, sig, now, path.name in finished)
+                done = before.get(path.name, False) and path.name not in self.carried
+                state, found = self._update(path, sig, now, done)
                 busy |= state
                 settled += [Settled(path, sig, sig[1] / 1e9, now)] if found else []
         gone = self._gone(set(listed))
@@ -158,11 +161,17 @@ class FolderWatch:
             and _real(p) not in self.skip
         ]
 
-    def _finished(self) -> set[str]:
-        """Names of the files closed after writing or renamed in since the last look."""
-        if self.closed is None and self.folder.is_dir():
+    def _events(self) -> dict[str, bool]:
+        """The writers' latest events since the last call, those carried over first (see
+        :meth:`ClosedFiles.events`). The folder is watched from the first look it is there;
+        a watch that stopped (the folder gone, events lost) starts again."""
+        events, self.carried = self.carried, {}
+        if (self.closed is None or not self.closed.active) and self.folder.is_dir():
             self.closed = ClosedFiles(self.folder)
-        return set() if self.closed is None else self.closed.names()
+        for name, done in ({} if self.closed is None else self.closed.events()).items():
+            events.pop(name, None)
+            events[name] = done
+        return events
 
     def _update(
         self, path: Path, sig: Signature, now: float, finished: bool = False
