@@ -33,6 +33,7 @@ _busy: Counter | None = None  # in a worker: the pool's count of workers running
 _PR_SET_PDEATHSIG = 1  # prctl option: the signal this process gets when its parent dies
 _abandoned = threading.Event()  # set once workers were killed instead of being waited for
 _STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+CLOSE_WAIT_S = 30.0  # s the workers get to finish the tasks they hold when the pool closes
 
 
 @contextlib.contextmanager
@@ -208,18 +209,24 @@ class WorkerPool:
         forever, and so the interpreter's exit. Not waiting leaves the manager thread closing
         its wake-up pipe while the exit hook writes to it (a traceback after the last line).
         A second Ctrl-C while they finish (or a pool that a Ctrl-C broke as it started,
-        whose workers would wait for work forever) kills them instead, and marks the pool
-        abandoned: the command then ends at once (:func:`abandoned`), never waiting for a
-        thread or a process.
+        whose workers would wait for work forever), or workers still busy after
+        :data:`CLOSE_WAIT_S`, are killed instead, and the pool is marked abandoned: the
+        command then ends at once (:func:`abandoned`), never waiting for a thread or a
+        process.
         """
         pool, self._pool = self._pool, None
         if pool is None:
             return
         workers = list((getattr(pool, "_processes", None) or {}).values())  # shutdown drops it
+        manager = getattr(pool, "_executor_manager_thread", None)  # and this too
         try:
-            pool.shutdown(wait=True, cancel_futures=True)
+            pool.shutdown(wait=False, cancel_futures=True)
+            if manager is not None:
+                manager.join(CLOSE_WAIT_S)
         finally:
             _kill_alive(workers)  # none is left once the pool shut down whole
+            if manager is not None and manager.is_alive():  # the exit hooks would wait for it
+                _abandoned.set()
 
 
 def abandoned() -> bool:
