@@ -226,6 +226,17 @@ def test_a_file_changed_after_its_close_waits_for_the_settle_time(tmp_path):
 
 
 @needs_inotify
+def test_a_finished_file_never_overtakes_one_that_landed_before_it(tmp_path):
+    _touch(tmp_path / "a.laz", b"1234")  # on the card before the watch began: no event
+    watch = FolderWatch(tmp_path, (".laz",), settle_s=0.5)
+    assert watch.look(now=0.0).settled == ()
+    _touch(tmp_path / "b.laz.part", b"5678")
+    (tmp_path / "b.laz.part").rename(tmp_path / "b.laz")
+    assert watch.look(now=0.1).settled == ()  # b is finished, but a is still settling
+    assert [s.path.name for s in watch.look(now=0.7).settled] == ["a.laz", "b.laz"]
+
+
+@needs_inotify
 def test_a_folder_made_again_is_watched_again(tmp_path):
     folder = tmp_path / "card"
     folder.mkdir()

@@ -111,11 +111,12 @@ class FolderWatch:
             return Look(present=False)
         states = [(path, signature(path)) for path in listed]
         self.carried = self._events()  # a file written or closed meanwhile waits a look
+        alone = sum(self._pending(path, sig) for path, sig in states) <= 1
         settled, busy = [], False
         for path, sig in states:
             if sig is not None:
                 done = before.get(path.name, False) and path.name not in self.carried
-                state, found = self._update(path, sig, now, done)
+                state, found = self._update(path, sig, now, done and alone)
                 busy |= state
                 settled += [Settled(path, sig, sig[1] / 1e9, now)] if found else []
         gone = self._gone(set(listed))
@@ -160,6 +161,17 @@ class FolderWatch:
             and not p.name.lower().endswith(TEMPORARY)
             and _real(p) not in self.skip
         ]
+
+    def _pending(self, path: Path, sig: Signature | None) -> bool:
+        """Whether the file waits to be handed out (it has bytes, is not left alone and was
+        not handed out in this state). A file its writer finished is handed out at once only
+        when it is the only one waiting: otherwise it settles by time with the others, so
+        that files still come in the order they landed (a file present before the watch
+        began sends no event, and one landing after it must not overtake it)."""
+        f = self.files.get(path)
+        if sig is None or sig[0] == 0:
+            return False
+        return f is None or (not f.quiet and f.handed != sig)
 
     def _events(self) -> dict[str, bool]:
         """The writers' latest events since the last call, those carried over first (see
