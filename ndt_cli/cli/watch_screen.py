@@ -120,7 +120,8 @@ def _started(e: Started) -> list[Any]:
     ]
     if e.control:
         out.append(f"  control: {_esc(e.control)}" + (f" ({_esc(e.crs)})" if e.crs else ""))
-    return [*out, f"  a scan lands once its file is unchanged for {e.settle_s:g} s; {idle}"]
+    lands = f"a scan lands once its copy is closed, or unchanged for {e.settle_s:g} s"
+    return [*out, f"  {lands}; {idle}"]
 
 
 def _landed(e: Landed) -> list[Any]:
