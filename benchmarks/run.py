@@ -81,6 +81,11 @@ def main() -> int:
     ap.add_argument(
         "--no-dense", action="store_true", help="skip the 17 M-point pair and network (minutes)"
     )
+    ap.add_argument(
+        "--large-campaigns",
+        action="store_true",
+        help="256 scans shuffled and 1,000 scans in both orders too (hours)",
+    )
     args = ap.parse_args()
     files, poses_file = data.street()
     small_files, small_poses = data.street_small()
@@ -105,7 +110,9 @@ def main() -> int:
         writers.section(repeat=2)
         dense.network(dense_files[".laz"], dense_poses, repeat=1)
     inprocess.adjustment()
-    campaign_bench.campaigns(args.quick, dense=not (args.quick or args.no_dense))
+    campaign_bench.campaigns(
+        args.quick, dense=not (args.quick or args.no_dense), large=args.large_campaigns
+    )
     if not args.quick or args.export_50m:
         fresh.export(
             ([] if args.quick else [15_000_000]) + ([50_000_000] if args.export_50m else [])
