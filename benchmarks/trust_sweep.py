@@ -2,13 +2,14 @@
 tuned on, against ground truth, run by hand or by ``make trust``:
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/trust_sweep.py [--quick]
-        [--world streets|interiors|forests|districts] [--only TEXT]
+        [--world streets|interiors|forests|districts|shuffled] [--only TEXT]
 
-Four worlds: streets (varied clean streets, hostile cases and the real MULLS sequence:
-``benchmarks/trust_cases.py``), building interiors, forests and city districts
-(``benchmarks/trust_worlds.py``). Printed per case, and totalled per world (clean and hostile
-cases apart): scans ok, false alarms (a scan that should be ok and is not; a correct link not
-ok), wrong ok (an ok scan or link that is not correct: within 0.1 deg / 5 cm,
+Five worlds: streets (varied clean streets, hostile cases and the real MULLS sequence:
+``benchmarks/trust_cases.py``), building interiors, forests, city districts and long routes
+given in shuffled order (``benchmarks/trust_worlds.py``). Printed per case, and totalled per
+world (clean and hostile cases apart): scans ok, false alarms (a scan that should be ok and is
+not; a correct link not ok), wrong ok (an ok scan or link that is not correct: within 0.1 deg
+/ 5 cm,
 :mod:`ndt_cli.analysis.trust`), scans split off the anchor's cluster, links the network kept
 that are wrong, the error of the NDT result before ICP and of each scan's vertical. Simulated
 scans are cached in ``benchmarks/.cache/trust``.
@@ -31,7 +32,12 @@ sys.path.insert(0, str(ROOT))
 import numpy as np  # noqa: E402
 
 from benchmarks.trust_cases import CACHE, Case, cross_scene_pairs, street_cases  # noqa: E402
-from benchmarks.trust_worlds import district_cases, forest_cases, interior_cases  # noqa: E402
+from benchmarks.trust_worlds import (  # noqa: E402
+    district_cases,
+    forest_cases,
+    interior_cases,
+    route_cases,
+)
 from ndt_cli.analysis import trust  # noqa: E402
 from ndt_cli.config import Config  # noqa: E402
 from ndt_cli.ndt.result import Status  # noqa: E402
@@ -43,6 +49,7 @@ WORLDS: dict[str, Callable[[bool], list[Case]]] = {
     "interiors": interior_cases,
     "forests": forest_cases,
     "districts": district_cases,
+    "shuffled": route_cases,
 }
 
 

@@ -12,13 +12,22 @@ interiors, forests and city districts, each case a simulated campaign with its g
   scanned on a 3 x 3 grid or along a line, 10-20 m apart, scanners tilted up to 1 degree.
 - Districts (:class:`~ndt_cli.sim.district.DistrictWorld`): 2 x 2 blocks walked round their
   ring and through the middle street (loops closing), grades, people and traffic.
+- Shuffled routes (:class:`ShuffledRoute`): one long straight street of sparse scans 16 m
+  apart, given in a random order (files merged from two scanners, a renumbering): every scan
+  is placed by coarse matches, none by the campaign order; an 18 m street of constant width
+  fits itself shifted by a few blocks.
 
 Every scan of a clean case should come out ok and right.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
+import numpy as np
+
 from benchmarks.trust_cases import Case, cached
+from ndt_cli import sim
 from ndt_cli.sim.district import DistrictWorld, scan_district
 from ndt_cli.sim.forest import ForestWorld, scan_forest
 from ndt_cli.sim.indoor import FloorWorld, scan_floor
@@ -91,6 +100,31 @@ def districts(quick: bool) -> list[DistrictWorld]:
     ]
 
 
+@dataclass(frozen=True)
+class ShuffledRoute:
+    """``sim.route`` of ``n_scans`` (``seed``), shuffled by ``sim.shuffled`` (``order``)."""
+
+    seed: int
+    n_scans: int
+    order: int
+    rays: tuple[int, int] = (1500, 200)
+
+    def describe(self) -> str:
+        return f"route of {self.n_scans} scans, seed {self.seed}, shuffled ({self.order})"
+
+
+def scan_shuffled_route(world: ShuffledRoute) -> tuple[object, list, list[np.ndarray]]:
+    route = sim.route(seed=world.seed, n_scans=world.n_scans, rays=world.rays)
+    mixed = sim.shuffled(route, seed=world.order)
+    return mixed.scene, list(mixed.scans), list(mixed.poses)
+
+
+def routes(quick: bool) -> list[ShuffledRoute]:
+    """Shuffled routes: 16 scans (the reduced tier), then 32 and 64."""
+    first = [ShuffledRoute(3, 16, 2)]
+    return first if quick else [*first, ShuffledRoute(7, 32, 3), ShuffledRoute(5, 64, 1)]
+
+
 def _clean(name: str, files: list, truth: list) -> Case:
     return Case(name, files, truth, [True] * len(files))
 
@@ -115,3 +149,10 @@ def forest_cases(quick: bool) -> list[Case]:
 def district_cases(quick: bool) -> list[Case]:
     modules = ("ground", "scene", "scanner", "worlds", "campaigns", "district")
     return [_clean(w.describe(), *cached(w, scan_district, modules, "d")) for w in districts(quick)]
+
+
+def route_cases(quick: bool) -> list[Case]:
+    modules = ("ground", "scene", "scanner", "campaigns")
+    return [
+        _clean(w.describe(), *cached(w, scan_shuffled_route, modules, "r")) for w in routes(quick)
+    ]

@@ -248,8 +248,9 @@ def test_the_order_stays_a_hint_while_it_places_half_the_scans(outcomes, hint):
 @pytest.mark.slow
 def test_a_shuffled_route_is_placed_by_its_coarse_matches_with_the_same_poses(tmp_path, caplog):
     """Sixteen scans of a route in random order: the order soon proves no hint, the rest are
-    placed best coarse match first; every scan is ok, right and where the route in order
-    puts it."""
+    placed best coarse match first; every scan is right and where the route in order puts
+    it, and ok, but for a scan that only a bridge ties in: out of order no bridge is trusted
+    (a street fits itself shifted by a few blocks), so that scan is suspect, saying so."""
     route = sim.route(seed=3, n_scans=16, rays=(1500, 200))
     mixed = sim.shuffled(route, seed=2)
     # file k of the mixed campaign holds scan order[k] of the route (its true pose says which)
@@ -261,11 +262,20 @@ def test_a_shuffled_route_is_placed_by_its_coarse_matches_with_the_same_poses(tm
         files = _write(tmp_path / "mixed", mixed)
         shuffled = run_chain(files, Config(), tmp_path / "b", jobs=2, anchor=order.index(0))
     assert any("no hint" in r.getMessage() for r in caplog.records)
+    ok_links: dict[int, list[int]] = {}  # per scan, the scans its ok links reach
+    for link in shuffled.links:
+        if link.ok:
+            ok_links.setdefault(link.target, []).append(link.source)
+            ok_links.setdefault(link.source, []).append(link.target)
     inv0 = np.linalg.inv(route.poses[0])
     for k, scan in enumerate(order):
         a, b = walk.solution.scans[scan], shuffled.solution.scans[k]
-        assert a.status is NodeStatus.OK and b.status is NodeStatus.OK, (scan, b.reason)
+        assert a.status is NodeStatus.OK, (scan, a.reason)
+        if b.status is not NodeStatus.OK:
+            assert b.status is NodeStatus.SUSPECT and "unused link" in b.reason, (scan, b.reason)
+            assert len(ok_links.get(k, [])) == 1, (scan, ok_links.get(k))
         assert a.cluster == b.cluster == 0, (scan, b.cluster)
         assert _right(b.T_world_scan, inv0 @ route.poses[scan]), scan
-        rot, trans = transform_errors(a.T_world_scan, b.T_world_scan)
-        assert rot < 0.001 and trans < 0.001, (scan, rot, trans)
+        if b.status is NodeStatus.OK:  # the same network but the bridge: within a link's
+            rot, trans = transform_errors(a.T_world_scan, b.T_world_scan)  # accuracy
+            assert rot < 0.005 and trans < 0.005, (scan, rot, trans)

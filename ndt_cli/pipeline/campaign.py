@@ -62,6 +62,7 @@ from ndt_cli.pipeline.network import (
     PlannedLink,
     classic_chain,
     default_radius,
+    kind_of,
     pair_of,
     plan_near,
 )
@@ -129,6 +130,7 @@ class Campaign:
         self.by_station: set[Pair] = set()  # pairs registered from a station's position once
         self.plan: set[Pair] = set()
         self.where: dict[int, Placed] = {}  # where each placed scan is, roughly
+        self.walked = True  # the campaign order proved a hint (see :meth:`_discover`)
         self.radius = float("nan")
 
     # ------------------------------------------------------------------ the entry points
@@ -166,7 +168,7 @@ class Campaign:
             matched(self.net.stations, names),
             self.net.grid_scale,
             self.cfg.quality.max_ambiguity,
-            self.cfg.quality.trust_bridges,
+            self.cfg.quality.trust_bridges and self.walked,
         )
         log_unused_controls(solution.datum)
         return ChainResult(
@@ -212,9 +214,7 @@ class Campaign:
         for n, k in enumerate(others):
             pair = pair_of(k.target, k.source)
             why = Dropped.OTHER_WAY if pair in pairs else Dropped.NOT_PLANNED
-            out.append(
-                TriedLink(replace(k, index=len(links) + n, kind=self._kind(pair, user)), why)
-            )
+            out.append(TriedLink(replace(k, index=len(links) + n, kind=kind_of(pair, user)), why))
         return tuple(out)
 
     def _world_system(self, solution: NetworkSolution) -> dict[str, Any]:
@@ -251,7 +251,10 @@ class Campaign:
     def _discover(self, new: list[int]) -> None:
         """Place each new scan in turn (not in the classic chain): in campaign order while the
         order is a hint (:func:`order_is_a_hint`), then the rest by their coarse matches with
-        the placed scans, the best matched first (:meth:`_place_by_matches`)."""
+        the placed scans, the best matched first (:meth:`_place_by_matches`). Once the order
+        is no hint, no bridge of the network is trusted: a pair proposed by a coarse match
+        alone and passed by its gate alone may be a street beside itself shifted by a few
+        blocks (a walk's order vouches for its neighbours, a shuffled one for none)."""
         if self.net.classic:
             return
         todo = [s for s in new if s in self.summaries]
@@ -259,6 +262,7 @@ class Campaign:
         while todo:
             if not order_is_a_hint(hinted):
                 progress.info("the campaign order is no hint: placing by coarse matches")
+                self.walked = False
                 self._place_by_matches(self._unplace_lonely(new) + todo)
                 return
             outcome = self._place(todo.pop(0))
@@ -446,13 +450,8 @@ class Campaign:
             pairs = self.plan | user | lonely
         chosen = sorted(p for p in pairs if p in self.links)
         return [
-            replace(self.links[p], index=n, kind=self._kind(p, user)) for n, p in enumerate(chosen)
+            replace(self.links[p], index=n, kind=kind_of(p, user)) for n, p in enumerate(chosen)
         ]
-
-    def _kind(self, pair: Pair, user: set[Pair]) -> LinkKind:
-        if pair in user:
-            return LinkKind.USER
-        return LinkKind.ADJACENT if pair[1] - pair[0] == 1 else LinkKind.FOUND
 
     def _user_todo(self) -> list[PlannedLink]:
         n = len(self.paths)
@@ -495,6 +494,5 @@ class Campaign:
 
 
 def _identity(path: Path) -> str:
-    """What a scan is known by in link keys: the SHA-256 of its file; a file that cannot be
-    read (whose links fail and are never kept) by its path."""
+    """A scan's key in links: its file's SHA-256; a file that cannot be read, its path."""
     return file_hash(path) or f"{UNREADABLE}{path}"

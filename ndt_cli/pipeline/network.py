@@ -57,6 +57,14 @@ def pair_of(a: int, b: int) -> Pair:
     return (min(a, b), max(a, b))
 
 
+def kind_of(pair: Pair, user: set[Pair]) -> LinkKind:
+    """How a link came to be: given by the user, between neighbours in campaign order, or
+    found."""
+    if pair in user:
+        return LinkKind.USER
+    return LinkKind.ADJACENT if pair[1] - pair[0] == 1 else LinkKind.FOUND
+
+
 def classic_chain(n_scans: int, unreadable: Iterable[int] = ()) -> list[PlannedLink]:
     """Each scan against the last readable scan before it (a scan that cannot be read gets one
     failing link from the scan before it, so that the outputs say why it has no pose)."""
