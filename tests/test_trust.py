@@ -130,3 +130,29 @@ def test_no_scan_of_an_office_floor_is_ok_and_wrong_and_no_wrong_link_is_kept(fl
     _, links, scans = floor
     assert not [s for s in scans if s.status is NodeStatus.OK and not s.correct]
     assert not [x for x in links if not x.correct and x.state in trust.KEPT]
+
+
+def test_a_clusters_errors_are_judged_in_the_frame_of_its_root_not_its_first_scan():
+    """Scan 0 is the anchor; scans 2 and 3 form cluster 1 in the frame of scan 2 (its root,
+    pose the identity); scan 1 joined cluster 1 only through an unused link, wrongly (400 m
+    off), and comes first: judged against it, the root and its mate would look wrong."""
+    from types import SimpleNamespace
+
+    from ndt_cli.core.transforms import pose2d_matrix
+    from ndt_cli.pipeline.solution import ScanPose
+
+    truth = [pose2d_matrix(16.0 * k, 0.0, 0.1 * k) for k in range(4)]
+    T_2_3 = np.linalg.inv(truth[2]) @ truth[3]
+    T_2_1_wrong = pose2d_matrix(400.0, 0.0, 0.0) @ np.linalg.inv(truth[2]) @ truth[1]
+    scans = (
+        ScanPose(NodeStatus.OK, np.eye(4), cluster=0),
+        ScanPose(
+            NodeStatus.SUSPECT, T_2_1_wrong, reason="posed only through unused link 1", cluster=1
+        ),
+        ScanPose(NodeStatus.OK, np.eye(4), cluster=1),
+        ScanPose(NodeStatus.OK, T_2_3, cluster=1),
+    )
+    result = SimpleNamespace(solution=SimpleNamespace(scans=scans), anchor=0, links=())
+    found = trust.scan_truths(result, truth)
+    assert [round(s.trans_m, 6) for s in found[2:]] == [0.0, 0.0]  # right in the root's frame
+    assert found[1].trans_m > 399.0 and found[1].status is NodeStatus.SUSPECT

@@ -140,10 +140,16 @@ def verticals(result: ChainResult, truth: Sequence[np.ndarray]) -> list[float]:
 
 
 def scan_truths(result: ChainResult, truth: Sequence[np.ndarray]) -> list[ScanTruth]:
-    """Every scan's status and pose error in its cluster's frame (the anchor's, or the
-    cluster's first scan's)."""
+    """Every scan's status and pose error in its cluster's frame: the anchor's, or that of
+    the cluster's root scan, whose own pose is the identity (the first scan of the cluster
+    when none is: a scan posed only through an unused link may come before the root, and
+    is no reference)."""
     scans = result.solution.scans
     roots: dict[int, int] = {0: result.anchor}
+    for k, scan in enumerate(scans):
+        T = scan.T_world_scan
+        if scan.cluster is not None and T is not None and np.allclose(T, np.eye(4), atol=1e-9):
+            roots.setdefault(scan.cluster, k)
     for k, scan in enumerate(scans):
         if scan.cluster is not None:
             roots.setdefault(scan.cluster, k)

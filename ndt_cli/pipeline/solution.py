@@ -9,9 +9,10 @@ along the fewest links from the anchor (one neighbour: the classic chain), and a
 through anything but ok links is not ``ok``.
 
 Frames: the world is the anchor scan's own frame; the scans of another cluster (no kept link
-ties them to the anchor's) are in the frame of that cluster's first scan. The graph works
-between the scans' reduced frames (each scan minus its reduction point), so that georeferenced
-coordinates never enter it: ``T_world_scan = T(r_root) X_scan T(-r_scan)``.
+ties them to the anchor's) are in the frame of that cluster's root: its first scan that kept
+links tie in. The graph works between the scans' reduced frames (each scan minus its
+reduction point), so that georeferenced coordinates never enter it:
+``T_world_scan = T(r_root) X_scan T(-r_scan)``.
 """
 
 from __future__ import annotations
@@ -52,7 +53,7 @@ class ScanPose:
     T_world_scan: np.ndarray | None
     sigma: np.ndarray | None = None  # (4,): x, y, z (m), yaw (deg)
     reason: str = ""
-    cluster: int | None = None  # 0: the anchor's; the others in their first scan's frame
+    cluster: int | None = None  # 0: the anchor's; the others in their root scan's frame
 
     @property
     def anchored(self) -> bool:
