@@ -12,11 +12,10 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 from benchmarks import data
 from benchmarks.common import RUN_BIN, fmt, table, target
 from ndt_cli import io, sim
+from ndt_cli.analysis import trust
 from ndt_cli.config import Config
 from ndt_cli.pipeline.campaign import Campaign
 from ndt_cli.pipeline.local_pool import WorkerPool
@@ -47,29 +46,6 @@ def _campaign(files: list[Path], out: Path) -> tuple[float, Campaign]:
     return time.perf_counter() - t0, (campaign, result)
 
 
-def wrong_ok(survey: sim.Survey, scans) -> int:
-    """Scans ok but wrong: within each cluster, the scans whose pose relative to the scan
-    most others agree with is off the truth by more than 0.3 m (a piece of street joined at
-    a wrong place counts, whatever the cluster's own frame)."""
-    wrong = 0
-    by_cluster: dict[int, list[int]] = {}
-    for k, x in enumerate(scans):
-        if x.status is NodeStatus.OK and x.T_world_scan is not None:
-            by_cluster.setdefault(x.cluster, []).append(k)
-    for members in by_cluster.values():
-        agree = 0
-        for r in members:
-            T_r, P_r = np.linalg.inv(scans[r].T_world_scan), np.linalg.inv(survey.poses[r])
-            near = [
-                np.hypot(*((T_r @ scans[k].T_world_scan)[:2, 3] - (P_r @ survey.poses[k])[:2, 3]))
-                <= 0.3
-                for k in members
-            ]
-            agree = max(agree, int(sum(near)))
-        wrong += len(members) - agree
-    return wrong
-
-
 def scaling(
     sizes: tuple[int, ...] = (16, 64, 128, 256), shuffled: tuple[int, ...] = (16, 64, 128)
 ) -> None:
@@ -78,8 +54,8 @@ def scaling(
     print("## Campaigns: cost against the number of scans\n")
     print(f"Sparse simulated scans ({RAYS[0]} x {RAYS[1]} rays) 16 m apart along one street, one")
     print("process with two workers; `ok`: scans ok; per scan: wall time, registrations and")
-    print("coarse matches divided by the scans; `ok wrong`: scans ok but off the truth by more")
-    print("than 0.3 m within their cluster; `clusters`: pieces the campaign ended in.\n")
+    print("coarse matches divided by the scans; `ok wrong`: scans ok but not right in their")
+    print("cluster's frame (as the trust sweep judges); `clusters`: pieces it ended in.\n")
     rows, per_scan = [], {}
     with tempfile.TemporaryDirectory() as tmp:
         for n in sizes:
@@ -93,7 +69,8 @@ def scaling(
                 scans = result.solution.scans
                 ok = sum(x.status is NodeStatus.OK for x in scans)
                 clusters = len({x.cluster for x in scans if x.cluster is not None})
-                wrong = wrong_ok(s, scans)
+                judged = trust.scan_truths(result, list(s.poses))
+                wrong = sum(t.status is NodeStatus.OK and not t.correct for t in judged)
                 per_scan[(label, n)] = wall / n
                 rows.append(
                     [

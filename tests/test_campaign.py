@@ -262,6 +262,7 @@ def test_a_shuffled_route_is_placed_by_its_coarse_matches_with_the_same_poses(tm
         files = _write(tmp_path / "mixed", mixed)
         shuffled = run_chain(files, Config(), tmp_path / "b", jobs=2, anchor=order.index(0))
     assert any("no hint" in r.getMessage() for r in caplog.records)
+    assert shuffled.solution.roots == {0: order.index(0)}  # one cluster, in the anchor's frame
     ok_links: dict[int, list[int]] = {}  # per scan, the scans its ok links reach
     for link in shuffled.links:
         if link.ok:

@@ -133,8 +133,8 @@ def test_no_scan_of_an_office_floor_is_ok_and_wrong_and_no_wrong_link_is_kept(fl
 
 
 def test_a_clusters_errors_are_judged_in_the_frame_of_its_root_not_its_first_scan():
-    """Scan 0 is the anchor; scans 2 and 3 form cluster 1 in the frame of scan 2 (its root,
-    pose the identity); scan 1 joined cluster 1 only through an unused link, wrongly (400 m
+    """Scan 0 is the anchor; scans 2 and 3 form cluster 1 in the frame of scan 2 (its root);
+    scan 1 joined cluster 1 only through an unused link, wrongly (400 m
     off), and comes first: judged against it, the root and its mate would look wrong."""
     from types import SimpleNamespace
 
@@ -152,7 +152,8 @@ def test_a_clusters_errors_are_judged_in_the_frame_of_its_root_not_its_first_sca
         ScanPose(NodeStatus.OK, np.eye(4), cluster=1),
         ScanPose(NodeStatus.OK, T_2_3, cluster=1),
     )
-    result = SimpleNamespace(solution=SimpleNamespace(scans=scans), anchor=0, links=())
+    solution = SimpleNamespace(scans=scans, roots={0: 0, 1: 2})
+    result = SimpleNamespace(solution=solution, anchor=0, links=())
     found = trust.scan_truths(result, truth)
     assert [round(s.trans_m, 6) for s in found[2:]] == [0.0, 0.0]  # right in the root's frame
     assert found[1].trans_m > 399.0 and found[1].status is NodeStatus.SUSPECT

@@ -141,15 +141,10 @@ def verticals(result: ChainResult, truth: Sequence[np.ndarray]) -> list[float]:
 
 def scan_truths(result: ChainResult, truth: Sequence[np.ndarray]) -> list[ScanTruth]:
     """Every scan's status and pose error in its cluster's frame: the anchor's, or that of
-    the cluster's root scan, whose own pose is the identity (the first scan of the cluster
-    when none is: a scan posed only through an unused link may come before the root, and
-    is no reference)."""
+    the cluster's root (:attr:`NetworkSolution.roots`; a scan posed only through an unused
+    link may come before it, and is no reference), else its first scan."""
     scans = result.solution.scans
-    roots: dict[int, int] = {0: result.anchor}
-    for k, scan in enumerate(scans):
-        T = scan.T_world_scan
-        if scan.cluster is not None and T is not None and np.allclose(T, np.eye(4), atol=1e-9):
-            roots.setdefault(scan.cluster, k)
+    roots: dict[int, int] = {0: result.anchor, **result.solution.roots}
     for k, scan in enumerate(scans):
         if scan.cluster is not None:
             roots.setdefault(scan.cluster, k)

@@ -81,6 +81,7 @@ class NetworkSolution:
     adjusted: bool
     timings: dict[str, float] = field(default_factory=dict)
     datum: Datum | None = None  # the anchor's cluster's world (None: the anchor's own frame)
+    roots: dict[int, int] = field(default_factory=dict)  # cluster -> the scan of its frame
 
     @property
     def poses(self) -> tuple[np.ndarray | None, ...]:
@@ -183,7 +184,7 @@ def solve(
     fits = tuple(
         LinkFit(EdgeState.USED if k.ok else EdgeState.UNUSED, reason=k.reason) for k in links
     )
-    return NetworkSolution(scans, fits, plain, adjusted=False)
+    return NetworkSolution(scans, fits, plain, adjusted=False, roots={0: anchor})
 
 
 def _why_unposed(k: int, links: Sequence[Link], unreadable: dict[int, str]) -> str:
@@ -225,6 +226,7 @@ def _adjusted(
         adjusted=True,
         timings=dict(net.v.timings),
         datum=world,
+        roots=dict(net.v.roots),
     )
 
 
