@@ -397,3 +397,23 @@ def test_both_reports_fit_400_and_1024_px_and_every_figure_loads(busy, control):
                 pg.close()
         finally:
             browser.close()
+
+
+def test_a_link_left_unused_though_its_gate_passed_it_says_why():
+    """The report adds the network's words where the link's own do not explain its state:
+    rejected, or ok by its gate and unused (a bridge that no bridge rule lets in)."""
+    from types import SimpleNamespace
+
+    from ndt_cli.pipeline.verify import EdgeState
+    from ndt_cli.report.reasons import network_note
+
+    def fit(state: EdgeState) -> SimpleNamespace:
+        return SimpleNamespace(state=state, reason="a bridge and no bridge is trusted")
+
+    ok, failed = SimpleNamespace(ok=True), SimpleNamespace(ok=False)
+    said = "network: a bridge and no bridge is trusted"
+    assert network_note(ok, fit(EdgeState.UNUSED)) == said
+    assert network_note(failed, fit(EdgeState.REJECTED)) == said
+    assert network_note(failed, fit(EdgeState.UNUSED)) == ""  # its own reason says why
+    assert network_note(ok, fit(EdgeState.CONFIRMED)) == ""
+    assert network_note(ok, None) == ""

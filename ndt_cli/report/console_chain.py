@@ -11,6 +11,7 @@ from ndt_cli.pipeline.result import ChainResult
 from ndt_cli.pipeline.verify import EdgeState
 from ndt_cli.report.console_fit import Col, print_fitted, styled
 from ndt_cli.report.html_chain import STATE_WORDS
+from ndt_cli.report.reasons import network_note
 from ndt_cli.report.tables import pair_row
 from ndt_cli.report.verdict import judge
 from ndt_cli.report.world import world_line, world_summary
@@ -81,9 +82,7 @@ def _links(result: ChainResult, console: Any) -> None:
     states, why = [], []
     for link, fit in zip(links, result.solution.links, strict=True):
         states.append(STATE_WORDS[fit.state])
-        reasons = [link.reason] if link.reason else []
-        reasons += [f"network: {fit.reason}"] if fit.state is EdgeState.REJECTED else []
-        why.append("; ".join(reasons))
+        why.append("; ".join(w for w in (link.reason, network_note(link, fit)) if w))
     fits = list(result.solution.links)
     layouts = _link_layouts(result, links, fits, states, why)
     print_fitted(console, layouts, "links of the network", 2)

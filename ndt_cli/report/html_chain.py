@@ -18,6 +18,7 @@ from ndt_cli.report.html import ControlRow, Figure, LinkRow, ScanRow, Verdict
 from ndt_cli.report.html_cards import link_cards
 from ndt_cli.report.html_report import finite, render
 from ndt_cli.report.network_numbers import NetworkNumbers, link_strength, network_numbers
+from ndt_cli.report.reasons import network_note
 from ndt_cli.report.verdict import judge
 from ndt_cli.report.world import world_line, world_summary
 
@@ -47,9 +48,8 @@ def link_row(names: Sequence[str], link: Link, state: str, fit: LinkFit | None) 
     or that was rejected (``fit``), none for the others."""
     r = link.result
     res = fit.residual if fit and fit.state in (EdgeState.CONFIRMED, EdgeState.REJECTED) else None
-    warnings = (link.reason,) if link.reason else ()
-    if fit is not None and fit.state is EdgeState.REJECTED and fit.reason:
-        warnings += (f"network: {fit.reason}",)
+    note = network_note(link, fit)
+    warnings = tuple(w for w in (link.reason, note) if w)
     return LinkRow(
         kind=link.kind.value,
         target=names[link.target],

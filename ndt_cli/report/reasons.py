@@ -13,12 +13,24 @@ import re
 from collections import Counter
 from dataclasses import replace
 
+from ndt_cli.pipeline.links import Link
 from ndt_cli.pipeline.result import ChainResult
-from ndt_cli.pipeline.solution import usable
+from ndt_cli.pipeline.solution import LinkFit, usable
+from ndt_cli.pipeline.verify import EdgeState
 
 _VIA = re.compile(r"link (\d+) \(T_(\d+)_(\d+)\)")
 _REJECTED = re.compile(r"(only rejected links: )([\d, ]+)")
 _PAIR = re.compile(r"\blink (\d+)-(\d+)\b")
+
+
+def network_note(link: Link, fit: LinkFit | None) -> str:
+    """What the network says of a link, where the link's own words do not explain its state:
+    rejected, or left unused though its gate passed it (a bridge nothing checks); '' else."""
+    if fit is None or not fit.reason:
+        return ""
+    if fit.state is EdgeState.REJECTED or (fit.state is EdgeState.UNUSED and link.ok):
+        return f"network: {fit.reason}"
+    return ""
 
 
 def named_reason(reason: str, names: tuple[str, ...], used: list[tuple[int, int]]) -> str:
