@@ -18,6 +18,7 @@ scans are cached in ``benchmarks/.cache/trust``.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import tempfile
@@ -82,6 +83,13 @@ def run_case(case: Case, cfg: Config, jobs: int) -> tuple[trust.TrustCounts, dic
             ),
             **(trust.metrics(link.result) if link.result is not None else {}),
             "warnings": link.reason,
+            "candidates": json.dumps(
+                []
+                if link.result is None
+                else trust.candidates(
+                    link.result, np.linalg.inv(case.truth[x.target]) @ case.truth[x.source]
+                )
+            ),
         }
         for x, link in zip(links, result.links, strict=True)
     ]

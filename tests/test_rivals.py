@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from ndt_cli.ndt.coarse_to_fine import Ranked
-from ndt_cli.ndt.rivals import describe_rival, distinct, judge, refuted
+from ndt_cli.ndt.rivals import describe_rival, distinct, judge, refuted, turned
 
 
 def _ranked(poses: list[tuple[float, float, float]], evidence: list[float]) -> Ranked:
@@ -51,6 +51,22 @@ def test_a_candidate_below_the_evidence_share_or_at_the_same_place_is_no_rival()
     assert blind.rivals == () and not blind.refuted.any()
     assert distinct(np.array([0, 0, 0]), np.array([0.6, 0, 0]))
     assert not distinct(np.array([0, 0, 0]), np.array([0.3, 0.3, np.radians(2.0)]))
+
+
+def test_a_candidate_turned_by_a_quarter_or_half_turn_is_a_rival_at_a_lower_share():
+    """A district's blocks matched turned: the candidate turned by 180 degrees with 0.85 of the
+    evidence is a rival at the turned share (0.8), the one slid by a block (no turn) with 0.9
+    is not (below 0.95); the one turned by 45 degrees with 0.88 neither."""
+    poses = [(0, 0, 0.3), (7, 0, 0.3 - np.pi), (60, 0, 0.3), (5, 5, 0.3 + np.pi / 4)]
+    ranked = _ranked(poses, [1.0, 0.85, 0.9, 0.88])
+    got = judge(ranked, np.zeros(4), 2.0, 0.003, (0.95, 0.8))
+    assert got.rivals == (1,)
+    quarter = _ranked([(0, 0, 3.0), (4, 4, 3.0 + np.pi / 2 - np.radians(1.5))], [1.0, 0.81])
+    assert judge(quarter, np.zeros(2), 2.0, 0.003, (0.95, 0.8)).rivals == (1,)
+    assert judge(quarter, np.zeros(2), 2.0, 0.003, 0.95).rivals == ()  # one share for both
+    assert turned(np.array([0, 0, -3.1]), np.array([0, 0, 0.04]))  # a half turn, wrapped
+    assert not turned(np.array([0, 0, 0.0]), np.array([0, 0, np.radians(86.0)]))
+    assert not turned(np.array([0, 0, 0.0]), np.array([9, 0, 0.0]))
 
 
 def test_a_rival_is_described_by_its_turn_and_distance():

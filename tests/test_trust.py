@@ -30,6 +30,11 @@ STREETS = [
 QUICK_RAYS = (1000, 120)  # the sweep's reduced tier indoors and in the forest
 FLOOR = sim.FloorWorld(seed=51, length=30.0, corridor_width=2.4, closed=0.3, rays=QUICK_RAYS)
 FOREST = sim.ForestWorld(seed=61, slope=0.1, slope_deg=250.0, shape=(1, 4), rays=QUICK_RAYS)
+# two blocks walked round and through the middle, 22 m apart: the walk's far side matches the
+# near side turned by 180 degrees, and corners match each other turned by 90
+DISTRICT = sim.DistrictWorld(
+    seed=71, blocks=(1, 2), spacing=22.0, spur=25.0, heading_deg=15.0, grade=0.04, people=10
+)
 
 
 def _chained(world, folder, simulate=sim.scan_street):
@@ -119,6 +124,22 @@ def floor(tmp_path_factory):
     return _judged(FLOOR, sim.scan_floor, tmp_path_factory.mktemp("floor"))
 
 
+@pytest.fixture(scope="module")
+def district(tmp_path_factory):
+    return _judged(DISTRICT, sim.scan_district, tmp_path_factory.mktemp("district"))
+
+
+def test_no_scan_of_a_district_of_repeated_blocks_is_ok_and_wrong(district):
+    """Links between scans that do not overlap match a block turned by 90 or 180 degrees;
+    they agree with each other, and placing the scans by them once hid the right links that
+    contradict them from the network."""
+    result, links, scans = district
+    assert not [s.index for s in scans if s.status is NodeStatus.OK and not s.correct]
+    assert not [(x.target, x.source) for x in links if not x.correct and x.state in trust.KEPT]
+    assert sum(s.status is NodeStatus.OK for s in scans) >= len(scans) - 2  # not by giving up
+    assert not [t for t in result.tried if t.link.ok]  # every link its gate passed is used
+
+
 def test_every_scan_of_a_forest_on_a_slope_is_ok_and_right(forest):
     result, links, scans = forest
     assert result.ok, FOREST.describe()
@@ -157,3 +178,32 @@ def test_a_clusters_errors_are_judged_in_the_frame_of_its_root_not_its_first_sca
     found = trust.scan_truths(result, truth)
     assert [round(s.trans_m, 6) for s in found[2:]] == [0.0, 0.0]  # right in the root's frame
     assert found[1].trans_m > 399.0 and found[1].status is NodeStatus.SUSPECT
+
+
+def test_each_candidate_is_measured_against_the_kept_pose_and_the_truth():
+    """Two candidates in reduced frames (reduction points (1, 2, 0) and (3, 0, 0)): the kept
+    one turned by 180 degrees and 10 m off the truth, the second the truth; the figures worked
+    out by hand."""
+    from dataclasses import replace
+
+    from ndt_cli.core.transforms import pose2d_matrix
+    from ndt_cli.ndt.result import Candidate, RegistrationResult
+
+    # truth in the scans' frames: source at (20, 5) turned 30 deg; reduced: minus target's
+    # reduction point, plus the source's turned by 30 deg
+    T_true = pose2d_matrix(20.0, 5.0, np.radians(30.0))
+    c30, s30 = np.cos(np.radians(30.0)), np.sin(np.radians(30.0))
+    tx, ty = 20.0 - 1.0 + 3.0 * c30, 5.0 - 2.0 + 3.0 * s30
+    kept = Candidate(tx + 6.0, ty + 8.0, 30.0 - 180.0, 500.0, 2.0, 0.05)
+    right = Candidate(tx, ty, 30.0, 450.0, 1.6, 0.01)
+    r = RegistrationResult(
+        np.eye(4), Status.SUSPECT, True, 1.0, 1.0, 1.0, (), (), (kept, right), np.eye(3), 0, 0, 0
+    )
+    r = replace(
+        r, reduction_target=np.array([1.0, 2.0, 0.0]), reduction_source=np.array([3.0, 0.0, 0.0])
+    )
+    first, second = trust.candidates(r, T_true)
+    assert first["error_m"] == pytest.approx(10.0) and first["error_deg"] == pytest.approx(180.0)
+    assert second["error_m"] == pytest.approx(0.0, abs=1e-9) and second["error_deg"] < 1e-9
+    assert second["evidence"] == pytest.approx(0.8) and second["free_space"] == 0.01
+    assert abs(second["turn_deg"]) == pytest.approx(180.0) and second["apart_m"] == 10.0

@@ -233,4 +233,39 @@ def metrics(r: RegistrationResult) -> dict[str, float]:
         "icp_move_m": float(move[1]),
         "tilt_deg": float(tilt),
         "free_space": r.free_space,
+        "free_space_around": r.free_space_around,
+        "free_space_second": r.free_space_second,
     }
+
+
+def candidates(r: RegistrationResult, T_true: np.ndarray) -> list[dict[str, float]]:
+    """Each distinct candidate of a registration (the kept pose first) against the kept pose
+    and the truth: its share of the kept pose's evidence, its free-space share, its turn (deg)
+    and distance (m) from the kept pose, and its planar error from the truth (deg, m), all in
+    the scans' reduced frames (the levelling's tilt, below a degree, is left out). For
+    measuring what separates a wrong pose's rivals from a right one's."""
+    A, B = np.eye(4), np.eye(4)
+    A[:3, 3], B[:3, 3] = -r.reduction_target, r.reduction_source
+    T = A @ T_true @ B
+    true = np.array([T[0, 3], T[1, 3], np.degrees(np.arctan2(T[1, 0], T[0, 0]))])
+    if not r.candidates:
+        return []
+    first = r.candidates[0]
+    out = []
+    for c in r.candidates:
+        pose = np.array([c.tx, c.ty, c.yaw_deg])
+        out.append(
+            {
+                "evidence": c.evidence / max(first.evidence, 1e-300),
+                "free_space": c.free_space,
+                "turn_deg": _turn(pose[2] - first.yaw_deg),
+                "apart_m": float(np.hypot(*(pose[:2] - [first.tx, first.ty]))),
+                "error_deg": abs(_turn(pose[2] - true[2])),
+                "error_m": float(np.hypot(*(pose[:2] - true[:2]))),
+            }
+        )
+    return out
+
+
+def _turn(deg: float) -> float:
+    return float((deg + 180.0) % 360.0 - 180.0)

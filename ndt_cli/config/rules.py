@@ -61,6 +61,7 @@ GATE: dict[str, tuple[float, str, float]] = {
     "quality.min_score_per_point": (0.0, "up", 10.0),
     "quality.min_overlap": (0.0, "up", 1.0),
     "quality.max_ambiguity": (0.95, "down", 0.0),
+    "quality.max_ambiguity_turned": (0.8, "down", 0.0),
     "quality.min_constraint_ratio": (0.01, "up", 1.0),
     "quality.min_constraint_ratio_icp": (0.02, "up", 1.0),
     "quality.max_free_space": (0.10, "down", 0.0),

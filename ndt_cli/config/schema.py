@@ -264,6 +264,13 @@ class QualityConfig:
         "chooses between them (indoors 0.5: NDT's evidence favours poses that put the two "
         "scanners close together)",
     )
+    max_ambiguity_turned: float = key(
+        0.8,
+        "the same for a candidate turned from the kept pose by 90 or 180 degrees: streets, "
+        "blocks and rooms of right angles repeat when turned, and a pair that does not overlap "
+        "matches only such copies (wrong links of a district: their turned rivals had "
+        "0.76-0.94 of the evidence; indoors the 0.5 above governs)",
+    )
     min_constraint_ratio: float = key(
         0.01,
         "degeneracy of a pose from the slices alone (no ICP): smaller over larger curvature of "

@@ -200,7 +200,9 @@ def _judged(ranked: Ranked, target: PreparedScan, source: PreparedScan, cfg: Con
         gap = margin(cfg.refine.voxel)
         for k, pose in enumerate(ranked.poses[:MAX_JUDGED]):
             shares[k] = free_space_share(*sights, lifted(target, source, pose), gap)
-    return judge(ranked, shares, s.free_space_ratio, s.free_space_share, cfg.quality.max_ambiguity)
+    q = cfg.quality
+    ambiguity = (q.max_ambiguity, min(q.max_ambiguity, q.max_ambiguity_turned))
+    return judge(ranked, shares, s.free_space_ratio, s.free_space_share, ambiguity)
 
 
 def _rivals(

@@ -16,7 +16,12 @@ field meets the other's. What the scanners saw (:mod:`ndt_cli.ndt.visibility`) i
 - The **winner** is the candidate of most NDT evidence among those not refuted.
 - Its **rivals** are the other candidates not refuted, distinct from it, with at least
   ``quality.max_ambiguity`` of its evidence: poses the data cannot tell from the winner (a
-  corridor turned by 180 degrees, a pose slid by a room's width). A link with a rival is
+  corridor turned by 180 degrees, a pose slid by a room's width); a candidate turned from it by
+  90 or 180 degrees (within :data:`TURN_TOLERANCE`) needs only
+  ``quality.max_ambiguity_turned``. Right angles repeat: the blocks of a district and the
+  rooms of a floor match themselves turned, and two scans that do not overlap at all match
+  only such copies, every candidate a turn or a block's shift of another, the first with a
+  little more evidence than the rest by chance. A link with a rival is
   ambiguous; the network chooses among the rivals of all links jointly
   (:mod:`ndt_cli.pipeline.hypotheses`).
 
@@ -35,6 +40,7 @@ from ndt_cli.ndt.coarse_to_fine import Ranked
 
 RIVAL_DISTANCE = 0.5  # m: candidates nearer than this (and within RIVAL_YAW) are one pose
 RIVAL_YAW = np.radians(3.0)
+TURN_TOLERANCE = np.radians(2.0)  # a candidate this near a quarter or half turn is turned
 
 
 @dataclass(frozen=True)
@@ -69,11 +75,24 @@ def distinct(a: np.ndarray, b: np.ndarray) -> bool:
     return not (near and abs(wrap_angle(a[2] - b[2])) <= RIVAL_YAW)
 
 
+def turned(a: np.ndarray, b: np.ndarray) -> bool:
+    """Two planar poses (tx, ty, yaw; m, rad) differ by a quarter or a half turn."""
+    turn = abs(wrap_angle(a[2] - b[2]))
+    return min(abs(turn - np.pi / 2), abs(turn - np.pi)) <= TURN_TOLERANCE
+
+
 def judge(
-    ranked: Ranked, shares: np.ndarray, ratio: float, margin: float, ambiguity: float
+    ranked: Ranked,
+    shares: np.ndarray,
+    ratio: float,
+    margin: float,
+    ambiguity: float | tuple[float, float],
 ) -> Judged:
     """The winner (first in the returned ``ranked``), the refuted candidates and the winner's
-    rivals, from candidates ranked by evidence and their free-space ``shares``."""
+    rivals, from candidates ranked by evidence and their free-space ``shares``.
+    ``ambiguity``: the share of the winner's evidence that makes a candidate a rival, and the
+    share for one turned from it by 90 or 180 degrees (one number: both)."""
+    same, turn = (ambiguity, ambiguity) if np.isscalar(ambiguity) else ambiguity
     out = refuted(shares, ratio, margin)
     allowed = np.flatnonzero(~out)
     win = int(allowed[0]) if len(allowed) else 0  # ranked by evidence: the first allowed
@@ -86,8 +105,9 @@ def judge(
         k
         for k in range(1, len(ranked.poses))
         if not out[k]
-        and ranked.evidence[k] >= ambiguity * best
         and distinct(ranked.poses[k], ranked.poses[0])
+        and ranked.evidence[k]
+        >= (turn if turned(ranked.poses[k], ranked.poses[0]) else same) * best
     )
     note = "" if win == 0 else _promoted(shares[0], float(shares[1]))
     return Judged(ranked, shares, out, rivals, note, kept)

@@ -438,8 +438,9 @@ class Campaign:
     # ------------------------------------------------------------------ helpers
 
     def _network(self) -> list[Link]:
-        """The links of the result: the plan, the user's pairs, and the links tried for scans
-        that no ok link connects (so that the outputs say why); indexed 0, 1, ..."""
+        """The links of the result, indexed 0, 1, ...: the plan, the user's pairs, every link
+        its gate passed (evidence against a placement built on wrong links) and those tried for
+        scans no ok link connects (so that the outputs say why)."""
         user = {k.pair for k in self.net.pairs}
         if self.net.classic:
             chain = {k.pair for k in classic_chain(len(self.paths), self.unreadable)}
@@ -447,7 +448,8 @@ class Campaign:
         else:
             linked = {i for p, k in self.links.items() if k.ok for i in p}  # scans with an ok link
             lonely = {p for p in self.links if not set(p) & linked}
-            pairs = self.plan | user | lonely
+            passed = {p for p, k in self.links.items() if k.ok}
+            pairs = self.plan | user | lonely | passed
         chosen = sorted(p for p in pairs if p in self.links)
         return [
             replace(self.links[p], index=n, kind=kind_of(p, user)) for n, p in enumerate(chosen)

@@ -19,8 +19,9 @@ from ndt_cli.pipeline.verify import EdgeState, NodeStatus
 
 
 class Dropped(StrEnum):
-    """Why a registration tried is not a link of the network: its pair is not in the network
-    planned from where the scans are (it was tried while placing a scan), or the same pair was
+    """Why a registration tried is not a link of the network: its gate did not pass and its
+    pair is not in the network planned from where the scans are (it was tried while placing a
+    scan), or the same pair was
     registered the other way round too and that one was kept (it ranked better)."""
 
     NOT_PLANNED = "not_planned"
@@ -29,7 +30,10 @@ class Dropped(StrEnum):
     @property
     def reason(self) -> str:
         if self is Dropped.NOT_PLANNED:
-            return "tried while placing a scan; not among the pairs the network was planned from"
+            return (
+                "tried while placing a scan, not ok, and not among the pairs the network was "
+                "planned from"
+            )
         return "the same pair registered the other way round is the link kept (it ranked better)"
 
 
