@@ -118,7 +118,9 @@ def test_a_shuffled_street_gives_the_same_result_as_the_street_in_order(street8,
     for k, scan in enumerate(order):
         T_a, T_b = in_order[f"scan_{scan}.laz"], shuffled[f"scan_{k}.laz"]
         rot, trans = transform_errors(T_a, T_b)
-        assert rot < 0.001 and trans < 0.001, (scan, rot, trans)  # the same pose
+        # the same pose, within what the networks' few different links move it: the links
+        # tried while placing a scan are in the network too, and they differ with the order
+        assert rot < 0.005 and trans < 0.005, (scan, rot, trans)
         assert _right(T_a, inv0 @ poses[scan])
     # the cost: at most twice the registrations of the street in order
     assert len(_link_files(b)) <= 2 * len(_link_files(a))
