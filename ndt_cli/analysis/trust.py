@@ -18,7 +18,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from ndt_cli.core.transforms import transform_errors
+from ndt_cli.core.transforms import transform_errors, wrap_angle
 from ndt_cli.ndt.result import RegistrationResult, Status
 from ndt_cli.pipeline.result import ChainResult
 from ndt_cli.pipeline.verify import EdgeState, NodeStatus
@@ -244,28 +244,25 @@ def candidates(r: RegistrationResult, T_true: np.ndarray) -> list[dict[str, floa
     and distance (m) from the kept pose, and its planar error from the truth (deg, m), all in
     the scans' reduced frames (the levelling's tilt, below a degree, is left out). For
     measuring what separates a wrong pose's rivals from a right one's."""
+    if not r.candidates:
+        return []
     A, B = np.eye(4), np.eye(4)
     A[:3, 3], B[:3, 3] = -r.reduction_target, r.reduction_source
     T = A @ T_true @ B
-    true = np.array([T[0, 3], T[1, 3], np.degrees(np.arctan2(T[1, 0], T[0, 0]))])
-    if not r.candidates:
-        return []
+    true = np.array([T[0, 3], T[1, 3], np.arctan2(T[1, 0], T[0, 0])])
     first = r.candidates[0]
+    kept = np.array([first.tx, first.ty, np.radians(first.yaw_deg)])
     out = []
     for c in r.candidates:
-        pose = np.array([c.tx, c.ty, c.yaw_deg])
+        pose = np.array([c.tx, c.ty, np.radians(c.yaw_deg)])
         out.append(
             {
                 "evidence": c.evidence / max(first.evidence, 1e-300),
                 "free_space": c.free_space,
-                "turn_deg": _turn(pose[2] - first.yaw_deg),
-                "apart_m": float(np.hypot(*(pose[:2] - [first.tx, first.ty]))),
-                "error_deg": abs(_turn(pose[2] - true[2])),
+                "turn_deg": float(np.degrees(wrap_angle(pose[2] - kept[2]))),
+                "apart_m": float(np.hypot(*(pose[:2] - kept[:2]))),
+                "error_deg": float(np.degrees(abs(wrap_angle(pose[2] - true[2])))),
                 "error_m": float(np.hypot(*(pose[:2] - true[:2]))),
             }
         )
     return out
-
-
-def _turn(deg: float) -> float:
-    return float((deg + 180.0) % 360.0 - 180.0)
