@@ -58,15 +58,26 @@ def fit_weighted(acc: np.ndarray) -> np.ndarray:
     prefers the true pose. Summed over the finest levels this picked the true pose on 60 of 60
     simulated street links, against 59 for the plain score.
     """
-    w = acc[:, SCORE] ** 2 / np.maximum(acc[:, MATCHED], 1.0)
-    return w / max(w.max(), 1e-300)
+    return relative(fit_weights(acc)[None, :])
+
+
+def fit_weights(acc: np.ndarray) -> np.ndarray:
+    """Per candidate: score times mean score per matched point (:func:`fit_weighted` before it
+    is made relative)."""
+    return acc[:, SCORE] ** 2 / np.maximum(acc[:, MATCHED], 1.0)
+
+
+def relative(weights: np.ndarray) -> np.ndarray:
+    """Evidence from fit weights (levels, K): each level's relative to its best, summed."""
+    best = np.maximum(weights.max(axis=1, initial=0.0), 1e-300)
+    return (weights / best[:, None]).sum(axis=0)
 
 
 @dataclass(frozen=True)
 class Refined:
     """Candidates (K,3) after the finest level, their final scores and summed evidence, the
-    level records, whether the winner of the finest level converged, and whether each
-    candidate did (K,)."""
+    level records, whether the winner of the finest level converged, whether each candidate
+    did (K,), and the fit weights (:func:`fit_weights`) of the evidence levels (levels, K)."""
 
     candidates: np.ndarray
     scores: np.ndarray
@@ -74,6 +85,23 @@ class Refined:
     levels: tuple[LevelStats, ...]
     converged: bool
     converged_each: np.ndarray
+    weights: np.ndarray
+
+    def joined(self, other: Refined) -> Refined:
+        """These candidates and ``other``'s, refined through the same schedule, as if refined
+        together: the evidence made relative to the best of both at each level."""
+        weights = np.concatenate([self.weights, other.weights], axis=1)
+        scores = np.concatenate([self.scores, other.scores])
+        each = np.concatenate([self.converged_each, other.converged_each])
+        return Refined(
+            np.vstack([self.candidates, other.candidates]),
+            scores,
+            relative(weights),
+            self.levels + other.levels,
+            bool(each[int(np.argmax(scores))]),
+            each,
+            weights,
+        )
 
 
 def coarse_to_fine(
@@ -88,7 +116,7 @@ def coarse_to_fine(
     """Refine every candidate pose through the cell sizes of ``schedule`` (coarse to fine);
     ``restarts``: restart from the offsets at every level, or per level."""
     cands = candidates
-    scores, evidence = np.zeros(len(cands)), np.zeros(len(cands))
+    scores, weights = np.zeros(len(cands)), []
     levels: list[LevelStats] = []
     converged, each = False, np.zeros(len(cands), dtype=bool)
     per_level = [restarts] * len(schedule) if isinstance(restarts, bool) else list(restarts)
@@ -102,11 +130,12 @@ def coarse_to_fine(
         flat = np.arange(len(cands)) * len(off) + pick
         cands, scores = res.params[flat], res.score[flat]
         if k >= len(schedule) - EVIDENCE_LEVELS:
-            evidence += fit_weighted(kernels.accumulate(maps(cell), pts, cands, True))
+            weights.append(fit_weights(kernels.accumulate(maps(cell), pts, cands, True)))
         w = flat[int(np.argmax(scores))]
         converged, each = bool(res.converged[w]), res.converged[flat].astype(bool)
         levels.append(level_stats(cell, res, w, len(starts), len(pts), t0))
-    return Refined(cands, scores, evidence, tuple(levels), converged, each)
+    weights_ = np.reshape(weights, (len(weights), len(cands)))
+    return Refined(cands, scores, relative(weights_), tuple(levels), converged, each, weights_)
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,10 @@
 3. **Winner by evidence**: fit-weighted scores over the three finest levels; the second
    distinct candidate's share is the ambiguity. The second replaces the first when the first
    puts clearly more points into the space the other scanner saw to be empty
-   (:mod:`ndt_cli.ndt.visibility`); the link is then at least suspect.
+   (:mod:`ndt_cli.ndt.visibility`); the link is then at least suspect. When the free space
+   refutes the favourite or puts many of the kept pose's points into empty space, the global
+   search's next distinct poses are refined too (up to :data:`DEEPER_CANDIDATES` in all) and
+   every candidate is judged again.
 4. **Quality metrics** of the winner at the finest cell (:mod:`ndt_cli.ndt.quality`).
 5. **Refinement**: robust point-to-plane ICP in full 6-DOF (:mod:`ndt_cli.ndt.refine`).
 6. **Status** from the gate's thresholds and the degeneracy of both Hessians.
@@ -24,7 +27,7 @@ Every stage receives its own config section. The compiled kernels are injectable
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -35,7 +38,7 @@ from ndt_cli.config.schema import Config
 from ndt_cli.core.geometry import Surfaces
 from ndt_cli.core.transforms import pose2d_matrix, yaw_of
 from ndt_cli.ndt.backend import NUMBA, Kernels
-from ndt_cli.ndt.coarse_to_fine import Ranked, coarse_to_fine, rank, with_verification
+from ndt_cli.ndt.coarse_to_fine import Ranked, Refined, coarse_to_fine, rank, with_verification
 from ndt_cli.ndt.grid import NDTMap
 from ndt_cli.ndt.kernels import SourcePoints
 from ndt_cli.ndt.levels import SourceSampler, TargetMaps, gate_inputs
@@ -52,13 +55,15 @@ from ndt_cli.ndt.visibility import free_space_share, margin
 
 @dataclass(frozen=True)
 class _Start:
-    """Candidate poses (reduced frames), the search's level records, the refinement schedule
-    and whether each of its levels restarts from the offsets."""
+    """Candidate poses (reduced frames), the search's level records, the refinement schedule,
+    whether each of its levels restarts from the offsets, and how many of the candidates the
+    global search gave (0: none)."""
 
     candidates: np.ndarray
     levels: list[LevelStats]
     schedule: tuple[float, ...]
     restarts: tuple[bool, ...]
+    searched: int = 0
 
 
 def _starts(
@@ -139,12 +144,15 @@ def _search(
         if len(found.candidates) and found.ratio < s.fallback_ratio:
             schedule = tuple(c for c in cells if c <= s.bnb_start_cell) or (min(cells),)
             flags = (s.refine_offsets,) + (False,) * (len(schedule) - 1)
-            return _Start(found.candidates, stages, schedule, flags)
+            return _Start(found.candidates, stages, schedule, flags, len(found.candidates))
     grid = start_search(target, source, maps, sampler, cells[0], s, cfg.optimizer, kernels)
     stages.append(grid.level)
     candidates.append(grid.candidates)
     schedule = cells[1:] if len(cells) > 1 else cells
-    return _Start(np.vstack(candidates), stages, schedule, (s.refine_offsets,) * len(schedule))
+    searched = sum(len(c) for c in candidates[:-1])
+    return _Start(
+        np.vstack(candidates), stages, schedule, (s.refine_offsets,) * len(schedule), searched
+    )
 
 
 def _planar(target: PreparedScan, source: PreparedScan, T: np.ndarray) -> np.ndarray:
@@ -187,6 +195,43 @@ def _refine(
 
 
 MAX_JUDGED = 16  # candidates, most evidence first, whose free space is measured
+DEEPER_CANDIDATES = 16  # distinct poses of the global search refined when its favourite is doubtful
+DEEPER_SHARE = 0.03  # a kept pose with more of its points in free space is doubtful (true: 0-2 %)
+
+
+def _doubtful(judged: Judged, start: _Start) -> bool:
+    """The global search gave candidates, and the free space refuted the favourite of the
+    refined ones or puts more than :data:`DEEPER_SHARE` of the kept pose's points into space
+    the other scanner saw empty."""
+    share = float(judged.shares[0]) if len(judged.shares) else float("nan")
+    return 0 < start.searched < DEEPER_CANDIDATES and (bool(judged.note) or share > DEEPER_SHARE)
+
+
+def _deeper(
+    target: PreparedScan,
+    source: PreparedScan,
+    start: _Start,
+    refined: Refined,
+    run: Callable[[np.ndarray], Refined],
+    cfg: Config,
+    kernels: Kernels,
+) -> Refined:
+    """``refined`` joined by the global search's next distinct poses, up to
+    :data:`DEEPER_CANDIDATES` in all, refined through the same schedule. The search's score
+    counts the points that land near target points, so a street turned by 180 degrees or slid
+    until the two scanners stand together, where each scan's densely seen surroundings meet the
+    other's, can outscore the truth by a sixth (scans 46 m apart on a busy street: the truth
+    was its ninth distinct pose); when the free space doubts the refined candidates
+    (:func:`_doubtful`), the truth may be further down the search's list. The first picks of
+    the search do not depend on how many are asked, so the new ones are the poses after those
+    refined."""
+    more = replace(cfg.search, bnb_candidates=DEEPER_CANDIDATES)
+    found = global_start(target, source, more, kernels)
+    extra = found.candidates[start.searched :]
+    if len(extra) == 0:
+        return refined
+    second = run(extra)
+    return replace(refined.joined(second), levels=(*refined.levels, found.level, *second.levels))
 
 
 def _judged(ranked: Ranked, target: PreparedScan, source: PreparedScan, cfg: Config) -> Judged:
@@ -276,10 +321,15 @@ def register_prepared(
     start = _starts(target, source, maps, sampler, cfg, init, guess, kernels)
     schedule = with_verification(start.schedule)
     restarts = start.restarts + (start.restarts[-1],) * (len(schedule) - len(start.restarts))
-    refined = coarse_to_fine(
-        start.candidates, schedule, maps, sampler, cfg.optimizer, restarts, kernels
-    )
+
+    def run(candidates: np.ndarray) -> Refined:
+        return coarse_to_fine(candidates, schedule, maps, sampler, cfg.optimizer, restarts, kernels)
+
+    refined = run(start.candidates)
     judged = _judged(rank(refined, schedule[-1]), target, source, cfg)
+    if _doubtful(judged, start):
+        refined = _deeper(target, source, start, refined, run, cfg, kernels)
+        judged = _judged(rank(refined, schedule[-1]), target, source, cfg)
     ranked = judged.ranked
     gate_map, gate_points = gate_inputs(
         maps, sampler, target.slices, source.slices, cfg.grid, cfg.source
