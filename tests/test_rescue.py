@@ -14,8 +14,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ndt_cli.config.schema import Config
 from ndt_cli.core.transforms import pose2d_matrix
 from ndt_cli.io.writers import write
+from ndt_cli.ndt.prepare import load_and_prepare
+from ndt_cli.ndt.register import register_prepared
+from ndt_cli.ndt.result import Deeper
 from ndt_cli.sim.worlds import StreetWorld, scan_street
 
 ROT_DEG, TRANS_M = 0.1, 0.05
@@ -84,6 +88,23 @@ def test_the_search_alone_and_a_guess_near_the_truth_end_there(tmp_path):
 
 
 @pytest.mark.slow
+def test_a_probe_leaves_the_deeper_search_to_the_plan(tmp_path):
+    """The same pair as a campaign's probe (``deeper=False``): its favourite is wrong and the
+    result says the deeper search was skipped; let deeper, it ends at the truth, ok."""
+    (target, source), _, ref = _pair(tmp_path, 13, 2, 3)
+    cfg = Config()
+    t, s = load_and_prepare(target, cfg), load_and_prepare(source, cfg)
+    probe = register_prepared(t, s, cfg, deeper=False)
+    assert probe.deeper is Deeper.SKIPPED and not probe.ok
+    rot, trans = _errors(probe.T_target_source, ref)
+    assert rot > ROT_DEG or trans > TRANS_M  # the premise: the first candidates miss
+    deep = register_prepared(t, s, cfg)
+    assert deep.deeper is Deeper.DONE and deep.ok
+    rot, trans = _errors(deep.T_target_source, ref)
+    assert rot < ROT_DEG and trans < TRANS_M
+
+
+@pytest.mark.slow
 def test_ndt_chain_places_the_scan_from_approximate_poses(tmp_path):
     """Scans 39 m apart: the search's candidates near the truth end 2.9 m from it."""
     files, poses, ref = _pair(tmp_path, 15, 0, 1)
@@ -113,7 +134,7 @@ def test_control_stations_place_the_scans_no_link_ties_to_the_anchor(tmp_path):
     only in a cluster of their own. With a station on each (2 cm, as GNSS on the scanners
     gives), the first one is registered from where its station puts it: every scan ok in
     the control's frame, at the truth."""
-    world = StreetWorld(seed=40, **{**BUSY, "n_scans": 3, "spacing": (40, 50)})
+    world = StreetWorld(seed=42, **{**BUSY, "n_scans": 3, "spacing": (40, 50)})
     _, scans, poses = scan_street(world)
     files = [tmp_path / f"scan_{k}.laz" for k in range(3)]
     for path, points in zip(files, scans, strict=True):

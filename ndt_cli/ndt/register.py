@@ -46,7 +46,7 @@ from ndt_cli.ndt.precompile import search_kernels_ahead
 from ndt_cli.ndt.prepare import PreparedScan, load_and_prepare_pair
 from ndt_cli.ndt.quality import Fit, Sights, Verdict, measure_fit, verdict_of
 from ndt_cli.ndt.refine import Refinement, refine_pose
-from ndt_cli.ndt.result import LevelStats, RegistrationResult, Rival
+from ndt_cli.ndt.result import Deeper, LevelStats, RegistrationResult, Rival
 from ndt_cli.ndt.rivals import Judged, describe_rival, judge
 from ndt_cli.ndt.search import global_start, start_search
 from ndt_cli.ndt.terrain import height_offset
@@ -299,6 +299,7 @@ class _Stages:
     shares: np.ndarray
     rivals: tuple[Rival, ...]
     scene: str
+    deeper: Deeper
 
 
 def register_prepared(
@@ -308,11 +309,14 @@ def register_prepared(
     init: Guess | np.ndarray | None = None,
     kernels: Kernels = NUMBA,
     guess: np.ndarray | None = None,
+    deeper: bool = True,
 ) -> RegistrationResult:
     """Register prepared scans. ``init``: a :class:`Guess` (or a 4x4 T_target_source, within
     1 m and 5 degrees) to start from instead of the search; ``guess``: a 4x4 T_target_source
     added to the search's candidates (a loop closure's pose from the network), never trusted
-    more than the search."""
+    more than the search; ``deeper``: refine the search's next distinct poses when the free
+    space doubts the first ones (:func:`_deeper`); a campaign's probes of pairs that may not
+    overlap at all leave it to the pairs of its plan (the result says it was skipped)."""
     if init is not None and not isinstance(init, Guess):
         init = Guess(np.asarray(init, float))
     t_start = time.perf_counter()
@@ -327,9 +331,11 @@ def register_prepared(
 
     refined = run(start.candidates)
     judged = _judged(rank(refined, schedule[-1]), target, source, cfg)
-    if _doubtful(judged, start):
+    depth = Deeper.SKIPPED if _doubtful(judged, start) else Deeper.NONE
+    if depth is Deeper.SKIPPED and deeper:
         refined = _deeper(target, source, start, refined, run, cfg, kernels)
         judged = _judged(rank(refined, schedule[-1]), target, source, cfg)
+        depth = Deeper.DONE
     ranked = judged.ranked
     gate_map, gate_points = gate_inputs(
         maps, sampler, target.slices, source.slices, cfg.grid, cfg.source
@@ -360,6 +366,7 @@ def register_prepared(
         judged.shares,
         rivals,
         cfg.scene.kind,
+        depth,
     )
     timings = {
         "grid_s": maps.build_s,
@@ -422,6 +429,7 @@ def _result(
         vertical_source=_vertical(source),
         rivals=s.rivals,
         scene=s.scene,
+        deeper=s.deeper,
     )
 
 

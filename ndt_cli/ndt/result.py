@@ -28,6 +28,17 @@ class Status(StrEnum):
     FAILED = "failed"
 
 
+class Deeper(StrEnum):
+    """Whether the global search's next distinct poses were refined (see
+    :func:`ndt_cli.ndt.register.register_prepared`): ``none`` (not needed: the free space did
+    not doubt the refined candidates, or the search did not run), ``skipped`` (doubted, but not
+    asked for: a campaign's placement probe), ``done``."""
+
+    NONE = "none"
+    SKIPPED = "skipped"
+    DONE = "done"
+
+
 @dataclass(frozen=True)
 class LevelStats:
     """One cell size of the coarse-to-fine schedule, for the winning start."""
@@ -168,6 +179,7 @@ class RegistrationResult:
     vertical_source: str = ""
     rivals: tuple[Rival, ...] = ()  # poses the data cannot tell from this one: ambiguous
     scene: str = "street"  # the settings it was registered with (ndt_cli.config.scenes)
+    deeper: Deeper = Deeper.NONE  # whether the search's next poses were refined
 
     def __repr__(self) -> str:
         rot = f"yaw {self.yaw_deg:.4f} deg"
@@ -283,6 +295,7 @@ class RegistrationResult:
             "vertical_source": self.vertical_source,
             "rivals": [r.to_dict() for r in self.rivals],
             "scene": self.scene,
+            "deeper": self.deeper.value,
         }
 
     @classmethod
@@ -293,6 +306,7 @@ class RegistrationResult:
         kw.update(
             T_target_source=np.array(d["T_target_source"], dtype=float),
             status=Status(d["status"]),
+            deeper=Deeper(d.get("deeper", Deeper.NONE)),
             points_per_slice=tuple(d["points_per_slice"]),
             levels=tuple(LevelStats(**lv) for lv in d["levels"]),
             candidates=tuple(Candidate(**c) for c in d["candidates"]),

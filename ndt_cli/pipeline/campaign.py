@@ -37,6 +37,7 @@ from ndt_cli.config.loading import dump
 from ndt_cli.config.schema import Config
 from ndt_cli.errors import UserInterruptError, caused_by_interrupt
 from ndt_cli.ndt.overlap import CoarseMatch, coarse_match
+from ndt_cli.ndt.result import Deeper
 from ndt_cli.pipeline import placement
 from ndt_cli.pipeline.by_control import frame_of, home_group, station_links
 from ndt_cli.pipeline.control import matched
@@ -67,14 +68,13 @@ from ndt_cli.pipeline.network import (
     plan_near,
 )
 from ndt_cli.pipeline.options import NetworkOptions
-from ndt_cli.pipeline.result import ChainResult, Dropped, ScanReport, TriedLink, scan_report
-from ndt_cli.pipeline.scans import DuplicateScanError, file_hash, scan_names
+from ndt_cli.pipeline.result import ChainResult, ScanReport, scan_report, tried_links
+from ndt_cli.pipeline.scans import UNREADABLE, DuplicateScanError, identity, scan_names
 from ndt_cli.pipeline.solution import NetworkSolution, solve
 
 log = logging.getLogger(__name__)
 progress = logging.getLogger("ndt_cli.progress")
 
-UNREADABLE = "unreadable "  # the identity of a file that cannot be hashed starts so
 ROUNDS = 3  # consolidation rounds: place, plan, register
 BRIDGES = 2  # registrations tried between a group and the others, best coarse matches first
 PROBES = 2  # placed scans nearest to a prediction that a scan is registered to, to test it
@@ -183,7 +183,7 @@ class Campaign:
             radius=self.radius,
             hashes=tuple(None if h.startswith(UNREADABLE) else h for h in self.hashes),
             **self._world_system(solution),
-            tried=self._tried(links),
+            tried=tried_links(self.tasks.tried, links, {k.pair for k in self.net.pairs}),
             samples={i: s.sample for i, s in sorted(self.summaries.items()) if s.sample},
         )
 
@@ -202,20 +202,6 @@ class Campaign:
             names[readable[0]],
         )
         return readable[0]
-
-    def _tried(self, links: Sequence[Link]) -> tuple[TriedLink, ...]:
-        """The registrations run that are not links of the network, indexed after them, in
-        the order of their scans: why each is left out."""
-        network = {k.key for k in links}
-        pairs = {pair_of(k.target, k.source) for k in links}
-        others = [k for k in self.tasks.tried if k.key not in network]
-        others.sort(key=lambda k: (*pair_of(k.target, k.source), k.target))
-        user, out = {k.pair for k in self.net.pairs}, []
-        for n, k in enumerate(others):
-            pair = pair_of(k.target, k.source)
-            why = Dropped.OTHER_WAY if pair in pairs else Dropped.NOT_PLANNED
-            out.append(TriedLink(replace(k, index=len(links) + n, kind=kind_of(pair, user)), why))
-        return tuple(out)
 
     def _world_system(self, solution: NetworkSolution) -> dict[str, Any]:
         """The control's stations and coordinate system, and the grid scale when applied."""
@@ -237,7 +223,7 @@ class Campaign:
         the campaign has already (a copy under another name) raises
         :class:`~ndt_cli.pipeline.scans.DuplicateScanError` and none is admitted."""
         files = [Path(p) for p in paths]
-        ids = [_identity(p) for p in files]
+        ids = [identity(p) for p in files]
         known = dict(zip(self.hashes, self.paths, strict=True))
         for p, h in zip(files, ids, strict=True):
             if h in known:
@@ -305,7 +291,7 @@ class Campaign:
         if hinted or known:
             walk = [scan - 1] if hinted and scan - 1 in where else []  # the scan before it
             targets = dict.fromkeys([*walk, *(g.via for g in hinted), *known])
-            self._register([self._planned(pair_of(scan, t)) for t in targets])
+            self._register([self._planned(pair_of(scan, t), deep=False) for t in targets])
             if placement.settle(scan, self.links, self.where):
                 return True if hinted else None
         tried: list[Prediction] = hinted[:1]
@@ -327,7 +313,7 @@ class Campaign:
                 placement.placing_radius(self.where, self.net.radius),
             )
             targets = dict.fromkeys([guess.via, *near])
-            self._register([self._planned(pair_of(scan, t)) for t in targets])
+            self._register([self._planned(pair_of(scan, t), deep=False) for t in targets])
             if placement.settle(scan, self.links, self.where):
                 return missed
         where[scan] = Placed(scan, np.eye(4))
@@ -368,7 +354,7 @@ class Campaign:
                 pairs += [p for p in cross[:BRIDGES] if p not in pairs]
             if not pairs:
                 return
-            self._register([self._planned(p) for p in pairs], both_ways=True)
+            self._register([self._planned(p, deep=False) for p in pairs], both_ways=True)
             joined = [placement.join(p, self.links, self.where) for p in pairs]
             failed = 0 if any(joined) else failed + 1
 
@@ -420,8 +406,16 @@ class Campaign:
             plan = self._replan(placement.placed_groups(self.where))
             todo = [p for p in sorted(plan) if p not in self.links]
             self._register([self._planned(p) for p in sorted(plan)], both_ways=True)
-            if not todo:
+            if not self._deepen(plan) and not todo:
                 return
+
+    def _deepen(self, pairs: Iterable[Pair]) -> bool:
+        """Register again, letting the search look deeper, the pairs whose probe is not ok
+        and was doubted by the free space (:class:`~ndt_cli.ndt.result.Deeper`): placement's
+        probes leave that to the pairs of the plan. Whether one of them became ok."""
+        again = [p for p in sorted(pairs) if p in self.links and _skipped(self.links[p])]
+        self.tasks.register_anew([self._planned(p) for p in again])
+        return any(self.links[p].ok for p in again)
 
     def _replan(self, where: list[dict[int, np.ndarray]]) -> set[Pair]:
         """The network's pairs from the positions of the groups of scans."""
@@ -459,14 +453,14 @@ class Campaign:
         n = len(self.paths)
         return [k for k in self.net.pairs if k.pair not in self.links and max(k.pair) < n]
 
-    def _planned(self, pair: Pair) -> PlannedLink:
+    def _planned(self, pair: Pair, deep: bool = True) -> PlannedLink:
         """A found pair, its target the scan whose content sorts first (so that the link is
-        the same whatever the order of the scans)."""
+        the same whatever the order of the scans); ``deep`` False for a probe."""
         a, b = pair
         if (self.hashes[b], b) < (self.hashes[a], a):
             a, b = b, a
         guess = relative(self.net.init_poses, a, b, self.net.init_sigma)
-        return PlannedLink(a, b, LinkKind.FOUND, guess)
+        return PlannedLink(a, b, LinkKind.FOUND, guess, deep)
 
     def _register(self, planned: Sequence[PlannedLink], both_ways: bool = False) -> None:
         """Register the planned links not registered yet (see :meth:`LinkRunner.register`)."""
@@ -495,6 +489,6 @@ class Campaign:
             ) from None
 
 
-def _identity(path: Path) -> str:
-    """A scan's key in links: its file's SHA-256; a file that cannot be read, its path."""
-    return file_hash(path) or f"{UNREADABLE}{path}"
+def _skipped(link: Link) -> bool:
+    """The link is not ok and its search did not look deeper when the free space doubted it."""
+    return not link.ok and link.result is not None and link.result.deeper is Deeper.SKIPPED

@@ -33,6 +33,7 @@ from ndt_cli.pipeline.workers import Failure
 progress = logging.getLogger("ndt_cli.progress")
 
 CACHED_SCANS = 48  # prepared scans kept between steps (others are read again)
+PROBE = "\nprobe"  # in a probe's key: its registration may differ from the planned link's
 
 
 class LinkRunner:
@@ -98,7 +99,9 @@ class LinkRunner:
         marginal = (Status.SUSPECT, Status.DEGENERATE)
         again = [k for k in planned if k.kind is LinkKind.FOUND and k.pair in self.links]
         again = [k for k in again if self.links[k.pair].status in marginal]
-        self.register_jobs([self._job(PlannedLink(k.source, k.target, k.kind)) for k in again])
+        self.register_jobs(
+            [self._job(PlannedLink(k.source, k.target, k.kind, deep=k.deep)) for k in again]
+        )
 
     def register_anew(self, planned: Sequence[PlannedLink]) -> None:
         """Register planned links even when their pair was registered already: with what they
@@ -162,9 +165,9 @@ class LinkRunner:
             self.prepared.popitem(last=False)
 
     def _job(self, k: PlannedLink) -> LinkJob:
-        inputs = self.cfg_text + guess_text(k.guess)
+        inputs = self.cfg_text + guess_text(k.guess) + ("" if k.deep else PROBE)
         key = link_key(self.hashes[k.target], self.hashes[k.source], inputs)
-        return LinkJob(0, k.target, k.source, key, k.kind, k.guess)
+        return LinkJob(0, k.target, k.source, key, k.kind, k.guess, k.deep)
 
     def _task(self, job: LinkJob) -> Callable[[], Link]:
         i, j = job.target, job.source

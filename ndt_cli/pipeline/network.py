@@ -40,13 +40,16 @@ class LinkKind(StrEnum):
 
 @dataclass(frozen=True)
 class PlannedLink:
-    """A pair to register: ``source`` onto ``target`` (scan indices), why, and a guess of
-    ``T_target_source`` (a :class:`~ndt_cli.ndt.register.Guess`; None: the search alone)."""
+    """A pair to register: ``source`` onto ``target`` (scan indices), why, a guess of
+    ``T_target_source`` (a :class:`~ndt_cli.ndt.register.Guess`; None: the search alone), and
+    whether the search may look deeper (False: a probe of a pair that may not overlap, see
+    :func:`~ndt_cli.ndt.register.register_prepared`)."""
 
     target: int
     source: int
     kind: LinkKind
     guess: Any = field(default=None, compare=False)
+    deep: bool = field(default=True, compare=False)
 
     @property
     def pair(self) -> Pair:

@@ -4,7 +4,8 @@ builds it)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from enum import StrEnum
 from pathlib import Path
 
@@ -13,6 +14,7 @@ import numpy as np
 from ndt_cli.pipeline.control import Station
 from ndt_cli.pipeline.datum import not_georeferenced
 from ndt_cli.pipeline.links import Link
+from ndt_cli.pipeline.network import Pair, kind_of, pair_of
 from ndt_cli.pipeline.samples import SliceSample
 from ndt_cli.pipeline.solution import NetworkSolution
 from ndt_cli.pipeline.verify import EdgeState, NodeStatus
@@ -111,3 +113,22 @@ def scan_report(index: int, result: ChainResult) -> ScanReport:
     T = scan.T_world_scan
     where = None if T is None else T[:3, 3].copy()
     return ScanReport(index, result.names[index], scan.status, where, tuple(linked), scan.reason)
+
+
+def tried_links(
+    tried: Sequence[Link], links: Sequence[Link], user: set[Pair]
+) -> tuple[TriedLink, ...]:
+    """The registrations run (``tried``) that are not ``links`` of the network, indexed after
+    them, in the order of their scans: why each is left out; ``user``: the pairs given."""
+    network = {k.key for k in links}
+    pairs = {pair_of(k.target, k.source) for k in links}
+    others = sorted(
+        (k for k in tried if k.key not in network),
+        key=lambda k: (*pair_of(k.target, k.source), k.target),
+    )
+    out = []
+    for n, k in enumerate(others):
+        pair = pair_of(k.target, k.source)
+        why = Dropped.OTHER_WAY if pair in pairs else Dropped.NOT_PLANNED
+        out.append(TriedLink(replace(k, index=len(links) + n, kind=kind_of(pair, user)), why))
+    return tuple(out)

@@ -46,6 +46,14 @@ def natural_sort(paths: Sequence[str | Path]) -> list[Path]:
 _known: dict[tuple[Path, int | None], tuple[tuple[int, ...], str]] = {}  # hashes, by file
 
 
+UNREADABLE = "unreadable "  # the identity of a file that cannot be hashed starts so
+
+
+def identity(path: Path) -> str:
+    """A scan's key in links: its file's SHA-256; a file that cannot be read, its path."""
+    return file_hash(path) or f"{UNREADABLE}{path}"
+
+
 def file_hash(path: Path, *, reuse: bool = True) -> str | None:
     """SHA-256 of a scan's file bytes (and its scan number in an E57); None if unreadable.
 

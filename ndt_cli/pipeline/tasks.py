@@ -29,7 +29,8 @@ from ndt_cli.pipeline.workers import Failure
 @dataclass(frozen=True)
 class LinkJob:
     """Which link to register: its index, the target and source scans (indices), its key, its
-    kind, and a guess of T_target_source (a :class:`Guess`; None: the search alone)."""
+    kind, a guess of T_target_source (a :class:`Guess`; None: the search alone), and whether
+    the search may look deeper (False: a probe)."""
 
     index: int
     target: int
@@ -37,6 +38,7 @@ class LinkJob:
     key: str
     kind: LinkKind = LinkKind.ADJACENT
     guess: Guess | None = None
+    deep: bool = True
 
     @property
     def pair(self) -> tuple[int, int]:
@@ -115,7 +117,7 @@ def register_link(job: LinkJob, target: PreparedScan, source: PreparedScan, cfg:
     """Register prepared scan ``source`` onto ``target``: by the search, and with a guess
     from it too, the better kept (:func:`~ndt_cli.pipeline.guesses.better`)."""
     try:
-        result = register_prepared(target, source, cfg)
+        result = register_prepared(target, source, cfg, deeper=job.deep)
         if job.guess is not None:
             result = better(result, register_prepared(target, source, cfg, init=job.guess))
     except NdtError as exc:
