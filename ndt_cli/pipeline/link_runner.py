@@ -19,10 +19,10 @@ from pathlib import Path
 
 from ndt_cli.config.schema import Config
 from ndt_cli.ndt.prepare import PreparedScan
-from ndt_cli.ndt.result import Status
+from ndt_cli.ndt.result import Deeper, Status
 from ndt_cli.pipeline.executors import Executor
 from ndt_cli.pipeline.guesses import guess_text
-from ndt_cli.pipeline.links import Link, LinkStore, link_key
+from ndt_cli.pipeline.links import Link, LinkStore, link_key, skipped_key
 from ndt_cli.pipeline.network import LinkKind, Pair, PlannedLink
 from ndt_cli.pipeline.scans import scan_names
 from ndt_cli.pipeline.solution import usable
@@ -33,7 +33,6 @@ from ndt_cli.pipeline.workers import Failure
 progress = logging.getLogger("ndt_cli.progress")
 
 CACHED_SCANS = 48  # prepared scans kept between steps (others are read again)
-PROBE = "\nprobe"  # in a probe's key: its registration may differ from the planned link's
 
 
 class LinkRunner:
@@ -110,19 +109,19 @@ class LinkRunner:
 
     def register_jobs(self, jobs: list[LinkJob]) -> None:
         """Run the jobs not finished yet (taken from the store where it has them)."""
-        jobs = [j for j in jobs if j.key not in self.finished]
+        jobs = [j for j in jobs if not self._done(j)]
         if self.resume:
             for job in jobs:
-                link = self.store.load(job.key)
+                link = self._stored(job)
                 if link is not None:
                     self._finish(job, job.adopt(link), save=False)
-                    self.reused.add(job.key)
-        todo = [j for j in jobs if j.key not in self.finished]
+                    self.reused.add(link.key)
+        todo = [j for j in jobs if not self._done(j)]
         for job in todo:
             bad = self.unreadable.get(job.target) or self.unreadable.get(job.source)
             if bad:
                 self._finish(job, job.failed(bad), save=False)
-        todo = [j for j in todo if j.key not in self.finished]
+        todo = [j for j in todo if not self._done(j)]
         if not todo:
             return
         # the pairs ride on the record, for a display that names the links at work
@@ -131,6 +130,20 @@ class LinkRunner:
         ships = self.executor.ships_data
         need = {s for j in todo for s in (j.target, j.source)}
         self.run(sorted(s for s in need if ships and s not in self.prepared), todo)
+
+    def _done(self, job: LinkJob) -> bool:
+        """The job's link is registered: in full, or (a probe) as a probe."""
+        return job.key in self.finished or (not job.deep and skipped_key(job.key) in self.finished)
+
+    def _stored(self, job: LinkJob) -> Link | None:
+        """The job's link from the store: in full, or (a probe) as a probe, or in full where its
+        search did not look deeper (what the probe gives)."""
+        if job.deep:
+            return self.store.load(job.key)
+        link = self.store.load(skipped_key(job.key)) or self.store.load(job.key)
+        if link is not None and link.result is not None and link.result.deeper is Deeper.DONE:
+            return None
+        return link
 
     def run(self, prepare: list[int], jobs: list[LinkJob]) -> None:
         """Prepare scans and register links on the executor, each link as soon as its two
@@ -165,7 +178,7 @@ class LinkRunner:
             self.prepared.popitem(last=False)
 
     def _job(self, k: PlannedLink) -> LinkJob:
-        inputs = self.cfg_text + guess_text(k.guess) + ("" if k.deep else PROBE)
+        inputs = self.cfg_text + guess_text(k.guess)
         key = link_key(self.hashes[k.target], self.hashes[k.source], inputs)
         return LinkJob(0, k.target, k.source, key, k.kind, k.guess, k.deep)
 
@@ -189,7 +202,7 @@ class LinkRunner:
 
     def _finish(self, job: LinkJob, link: Link, save: bool = True) -> None:
         """Keep a finished link (the better of two ways round, see :meth:`register`)."""
-        self.finished.add(job.key)
+        self.finished.add(link.key)
         self.tried.append(link)
         kept = self.links.get(job.pair)
         if kept is None or _rank(link) < _rank(kept):

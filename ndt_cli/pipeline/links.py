@@ -49,6 +49,13 @@ def link_key(target_hash: str, source_hash: str, cfg_text: str) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+def skipped_key(key: str) -> str:
+    """The key of a probe's link whose search skipped its deeper round
+    (:class:`~ndt_cli.ndt.result.Deeper`): its result is not the one the link of ``key`` (the
+    same inputs, registered in full) has. A probe whose search did not need it is that link."""
+    return hashlib.sha256(f"{key}\nskipped".encode()).hexdigest()
+
+
 @dataclass(frozen=True)
 class Link:
     """One registration of the campaign: scan ``source`` onto scan ``target`` (indices into the
