@@ -20,6 +20,8 @@ from ndt_cli.io.writers import write
 from ndt_cli.ndt.prepare import load_and_prepare
 from ndt_cli.ndt.register import register_prepared
 from ndt_cli.ndt.result import Deeper
+from ndt_cli.pipeline.links import Link
+from ndt_cli.pipeline.result import Dropped, tried_links
 from ndt_cli.sim.worlds import StreetWorld, scan_street
 
 ROT_DEG, TRANS_M = 0.1, 0.05
@@ -102,6 +104,11 @@ def test_a_probe_leaves_the_deeper_search_to_the_plan(tmp_path):
     assert deep.deeper is Deeper.DONE and deep.ok
     rot, trans = _errors(deep.T_target_source, ref)
     assert rot < ROT_DEG and trans < TRANS_M
+    # the outputs say why the probe is not the network's link, and tell it from the other way
+    link = Link(0, 0, 1, "full", deep)
+    tried = [Link(1, 0, 1, "probe", probe), Link(2, 1, 0, "reverse", probe)]
+    why = [t.why for t in tried_links(tried, [link], set())]
+    assert why == [Dropped.SEARCHED_AGAIN, Dropped.OTHER_WAY]
 
 
 @pytest.mark.slow

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ndt_cli.ndt.result import Deeper
 from ndt_cli.pipeline.control import Station
 from ndt_cli.pipeline.datum import not_georeferenced
 from ndt_cli.pipeline.links import Link
@@ -23,11 +24,13 @@ from ndt_cli.pipeline.verify import EdgeState, NodeStatus
 class Dropped(StrEnum):
     """Why a registration tried is not a link of the network: its gate did not pass and its
     pair is not in the network planned from where the scans are (it was tried while placing a
-    scan), or the same pair was
-    registered the other way round too and that one was kept (it ranked better)."""
+    scan), the same pair was registered the other way round too and that one was kept (it
+    ranked better), or it was a probe whose search skipped its deeper round and the pair was
+    registered again with it."""
 
     NOT_PLANNED = "not_planned"
     OTHER_WAY = "other_way_kept"
+    SEARCHED_AGAIN = "searched_again"
 
     @property
     def reason(self) -> str:
@@ -35,6 +38,11 @@ class Dropped(StrEnum):
             return (
                 "tried while placing a scan, not ok, and not among the pairs the network was "
                 "planned from"
+            )
+        if self is Dropped.SEARCHED_AGAIN:
+            return (
+                "tried while placing a scan without the search's deeper round; the pair, in "
+                "the network, was registered again with it"
             )
         return "the same pair registered the other way round is the link kept (it ranked better)"
 
@@ -121,7 +129,7 @@ def tried_links(
     """The registrations run (``tried``) that are not ``links`` of the network, indexed after
     them, in the order of their scans: why each is left out; ``user``: the pairs given."""
     network = {k.key for k in links}
-    pairs = {pair_of(k.target, k.source) for k in links}
+    ways = {pair_of(k.target, k.source): (k.target, k.source) for k in links}
     others = sorted(
         (k for k in tried if k.key not in network),
         key=lambda k: (*pair_of(k.target, k.source), k.target),
@@ -129,6 +137,20 @@ def tried_links(
     out = []
     for n, k in enumerate(others):
         pair = pair_of(k.target, k.source)
-        why = Dropped.OTHER_WAY if pair in pairs else Dropped.NOT_PLANNED
+        why = _why(k, ways.get(pair))
         out.append(TriedLink(replace(k, index=len(links) + n, kind=kind_of(pair, user)), why))
     return tuple(out)
+
+
+def _why(link: Link, way: tuple[int, int] | None) -> Dropped:
+    """Why ``link`` is not in the network, whose link of the same pair (if any) registered
+    ``way`` (target, source)."""
+    if way is None:
+        return Dropped.NOT_PLANNED
+    if way == (link.target, link.source) and _skipped(link):
+        return Dropped.SEARCHED_AGAIN
+    return Dropped.OTHER_WAY
+
+
+def _skipped(link: Link) -> bool:
+    return link.result is not None and link.result.deeper is Deeper.SKIPPED
