@@ -234,6 +234,33 @@ def test_a_lock_left_by_a_killed_run_is_no_obstacle(tmp_path):
         pass
 
 
+def test_a_lock_whose_run_is_gone_is_waited_for_while_its_last_process_exits(tmp_path):
+    """A run killed with its workers: the lock names a process that is gone, while another of
+    its processes still holds it for a moment. The next run waits and takes it."""
+    out = tmp_path / "out"
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()  # a process that existed and is gone
+    holder = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import fcntl, os, sys, time\n"
+            "fd = os.open(sys.argv[1], os.O_RDWR | os.O_CREAT)\n"
+            "fcntl.flock(fd, fcntl.LOCK_EX)\n"
+            "os.write(fd, (sys.argv[2] + ' ndt-chain').encode())\n"
+            "print('held', flush=True); time.sleep(1.5)",
+            str(lock_path(out)),
+            str(gone.pid),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert holder.stdout.readline().strip() == "held"
+    with output_lock(out, "the next run"):
+        assert holder.poll() is not None  # taken only once the last holder was gone
+    holder.wait()
+
+
 @pytest.mark.slow
 def test_another_campaign_s_result_is_kept_unless_overwrite(street, other_street, tmp_path):
     out = tmp_path / "out"

@@ -7,7 +7,9 @@ publish; a second run into the same folder is refused at once (exit 2, one line 
 process that holds it). The lock sits beside the folder, not in it, because publishing
 replaces the folder as a whole. The kernel releases the lock of a process that dies, however
 it dies (a lock file left by a killed run is no obstacle: the next run takes it), and a run
-that ends removes its lock file.
+that ends removes its lock file. A run killed with its worker processes (``kill`` of the
+process group) has the lock released only when the last of them is gone: while the process
+the lock names is gone, the next run waits for it, up to :data:`SETTLE_S`.
 """
 
 from __future__ import annotations
@@ -15,10 +17,13 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
 from ndt_cli.errors import OutputError
+
+SETTLE_S = 10.0  # s: how long a lock whose run is gone may still be held by its last processes
 
 
 def lock_path(out: Path) -> Path:
@@ -50,9 +55,7 @@ def _acquire(path: Path, out: Path, command: str) -> int:
         while True:
             flags = os.O_RDWR | os.O_CREAT | os.O_CLOEXEC | os.O_NOFOLLOW  # never another file
             fd = os.open(path, flags, 0o644)
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except BlockingIOError:
+            if not _lock(fd):
                 holder = _holder(fd)
                 os.close(fd)
                 raise OutputError(
@@ -74,6 +77,31 @@ def _acquire(path: Path, out: Path, command: str) -> int:
             ) from None
         raise OutputError(f"cannot lock the folder ({exc.strerror or exc})", out) from None
     return fd
+
+
+def _lock(fd: int) -> bool:
+    """Take the exclusive lock of ``fd``; while the process its file names is gone (its last
+    worker processes still exiting), wait for them, up to :data:`SETTLE_S`. Whether it was
+    taken."""
+    deadline = time.monotonic() + SETTLE_S
+    while True:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return True
+        except BlockingIOError:
+            if _alive(fd) or time.monotonic() > deadline:
+                return False
+            time.sleep(0.05)
+
+
+def _alive(fd: int) -> bool:
+    """Whether the process the lock file names exists (True when it names none)."""
+    try:
+        pid = int(os.pread(fd, 200, 0).split()[0])
+        os.kill(pid, 0)
+    except (ValueError, IndexError, OSError) as exc:
+        return not isinstance(exc, ProcessLookupError)
+    return True
 
 
 def _still_linked(fd: int, path: Path) -> bool:
