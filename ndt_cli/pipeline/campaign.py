@@ -37,7 +37,6 @@ from ndt_cli.config.loading import dump
 from ndt_cli.config.schema import Config
 from ndt_cli.errors import UserInterruptError, caused_by_interrupt
 from ndt_cli.ndt.overlap import CoarseMatch, coarse_match
-from ndt_cli.ndt.result import Deeper
 from ndt_cli.pipeline import placement
 from ndt_cli.pipeline.by_control import frame_of, home_group, station_links
 from ndt_cli.pipeline.control import matched
@@ -413,7 +412,9 @@ class Campaign:
         """Register again, letting the search look deeper, the pairs whose probe is not ok
         and was doubted by the free space (:class:`~ndt_cli.ndt.result.Deeper`): placement's
         probes leave that to the pairs of the plan. Whether one of them became ok."""
-        again = [p for p in sorted(pairs) if p in self.links and _skipped(self.links[p])]
+        links = self.links
+        again = [p for p in sorted(pairs) if p in links and links[p].skipped_deeper]
+        again = [p for p in again if not links[p].ok]
         self.tasks.register_anew([self._planned(p) for p in again])
         return any(self.links[p].ok for p in again)
 
@@ -487,8 +488,3 @@ class Campaign:
                 f"interrupted: {len(self.links)} finished link(s) kept in {self.store.folder}; "
                 f"{self.on_interrupt} to continue"
             ) from None
-
-
-def _skipped(link: Link) -> bool:
-    """The link is not ok and its search did not look deeper when the free space doubted it."""
-    return not link.ok and link.result is not None and link.result.deeper is Deeper.SKIPPED

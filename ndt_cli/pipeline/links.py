@@ -25,7 +25,7 @@ from ndt_cli.io.matrices import rigid_problem
 from ndt_cli.io.serialize import to_json
 from ndt_cli.ndt.bnb import ScoreField
 from ndt_cli.ndt.overlap import Sketch
-from ndt_cli.ndt.result import RegistrationResult, Status
+from ndt_cli.ndt.result import Deeper, RegistrationResult, Status
 from ndt_cli.pipeline.network import LinkKind
 from ndt_cli.pipeline.samples import SliceSample
 
@@ -77,6 +77,12 @@ class Link:
     @property
     def ok(self) -> bool:
         return self.status is Status.OK
+
+    @property
+    def skipped_deeper(self) -> bool:
+        """Its search skipped the deeper round the free space asked for (a probe, see
+        :class:`~ndt_cli.ndt.result.Deeper`)."""
+        return self.result is not None and self.result.deeper is Deeper.SKIPPED
 
     @property
     def reason(self) -> str:

@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ndt_cli.ndt.result import Deeper
 from ndt_cli.pipeline.control import Station
 from ndt_cli.pipeline.datum import not_georeferenced
 from ndt_cli.pipeline.links import Link
@@ -147,10 +146,6 @@ def _why(link: Link, way: tuple[int, int] | None) -> Dropped:
     ``way`` (target, source)."""
     if way is None:
         return Dropped.NOT_PLANNED
-    if way == (link.target, link.source) and _skipped(link):
+    if way == (link.target, link.source) and link.skipped_deeper:
         return Dropped.SEARCHED_AGAIN
     return Dropped.OTHER_WAY
-
-
-def _skipped(link: Link) -> bool:
-    return link.result is not None and link.result.deeper is Deeper.SKIPPED

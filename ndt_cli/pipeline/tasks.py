@@ -19,7 +19,6 @@ from ndt_cli.io.multiscan import split_spec
 from ndt_cli.ndt.overlap import Sketch, sketch
 from ndt_cli.ndt.prepare import PreparedScan, load_and_prepare
 from ndt_cli.ndt.register import Guess, register_prepared
-from ndt_cli.ndt.result import Deeper
 from ndt_cli.pipeline.guesses import better
 from ndt_cli.pipeline.links import Link, skipped_key
 from ndt_cli.pipeline.network import LinkKind
@@ -123,8 +122,8 @@ def register_link(job: LinkJob, target: PreparedScan, source: PreparedScan, cfg:
             result = better(result, register_prepared(target, source, cfg, init=job.guess))
     except NdtError as exc:
         return job.failed(str(exc))
-    key = skipped_key(job.key) if result.deeper is Deeper.SKIPPED else job.key
-    return Link(job.index, job.target, job.source, key, result, kind=job.kind)
+    link = Link(job.index, job.target, job.source, job.key, result, kind=job.kind)
+    return replace(link, key=skipped_key(job.key)) if link.skipped_deeper else link
 
 
 def register_paths(job: LinkJob, target: Path, source: Path, cfg: Config) -> Link:
