@@ -83,3 +83,56 @@ def test_a_worker_gets_its_share_never_more_than_the_start(monkeypatch, budget):
     assert threads.threads() == 1
     set_threads(8)
     assert threads.threads() == 2
+
+
+_PESTERED = """
+import os, signal, threading, time
+from ndt_cli.core import threads
+
+threads.set_threads(3)
+pools = []
+end = time.monotonic() + {seconds}
+stop, started = threading.Event(), threading.Event()
+
+
+def pester():
+    started.wait()
+    while not stop.is_set():
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.0003)
+
+
+pesterer = threading.Thread(target=pester, daemon=True)
+pesterer.start()
+started.set()
+interrupted = 0
+while True:
+    try:
+        if time.monotonic() > end:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+            break
+        pools.append(threads._pool)  # kept alive, as the process's one pool is
+        threads._pool = None  # a fresh pool, whose helper threads start in this call
+        threads.parallel_for(lambda start, stop: None, 3)
+    except KeyboardInterrupt:
+        interrupted += 1
+stop.set()
+pesterer.join()
+print(interrupted)
+"""
+
+
+def test_ctrl_c_while_helper_threads_start_never_holds_up_the_exit():
+    """Ctrl-C lands again and again while the loop's helper threads start: the process is
+    interrupted, and it ends (a thread started but not recorded by its pool, as a Ctrl-C
+    inside the thread's start left it, would keep the interpreter's exit waiting forever)."""
+    import subprocess
+    import sys
+
+    code = _PESTERED.format(seconds=3.0)
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    proc = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=60
+    )
+    assert proc.returncode == 0, proc.stderr[-500:]
+    assert int(proc.stdout) > 0  # the signals did land

@@ -21,6 +21,8 @@ from concurrent.futures import ThreadPoolExecutor
 from contextlib import AbstractContextManager
 from typing import Protocol
 
+from ndt_cli.core.signals import stop_signals_held
+
 
 def _cores() -> int:
     try:
@@ -92,14 +94,17 @@ def blocks(n_tasks: int, n_threads: int) -> list[tuple[int, int]]:
 def parallel_for(kernel: Callable[..., object], n_tasks: int, *args: object) -> None:
     """Run ``kernel(start, stop, *args)`` on blocks of ``range(n_tasks)``, one per thread of the
     budget; the calling thread runs the first block. ``kernel`` must release the GIL and write
-    only its tasks' outputs. The first exception of a block is raised once all have ended."""
+    only its tasks' outputs. The first exception of a block is raised once all have ended (and
+    a Ctrl-C that came while they started)."""
     parts = blocks(n_tasks, threads())
     if len(parts) == 1:
         kernel(0, n_tasks, *args)
         return
     pool = _helpers(len(parts) - 1)
-    futures = [pool.submit(kernel, start, stop, *args) for start, stop in parts[1:]]
+    futures = []
     try:
+        with stop_signals_held():  # a helper thread started is recorded by its pool
+            futures += [pool.submit(kernel, start, stop, *args) for start, stop in parts[1:]]
         kernel(*parts[0], *args)
     finally:
         errors = [f.exception() for f in futures]

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import ctypes
 import logging
 import multiprocessing
@@ -10,11 +9,12 @@ import os
 import signal
 import sys
 import threading
-from collections.abc import Callable, Hashable, Iterator
+from collections.abc import Callable, Hashable
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
+from ndt_cli.core.signals import STOP_SIGNALS, stop_signals_held
 from ndt_cli.core.threads import Counter
 from ndt_cli.pipeline.workers import (
     Failure,
@@ -32,34 +32,7 @@ log = logging.getLogger(__name__)
 _busy: Counter | None = None  # in a worker: the pool's count of workers running a task
 _PR_SET_PDEATHSIG = 1  # prctl option: the signal this process gets when its parent dies
 _abandoned = threading.Event()  # set once workers were killed instead of being waited for
-_STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 CLOSE_WAIT_S = 30.0  # s the workers get to finish the tasks they hold when the pool closes
-
-
-@contextlib.contextmanager
-def _stop_signals_held() -> Iterator[None]:
-    """Hold Ctrl-C and SIGTERM back while worker processes may start (a pool starts them in
-    ``submit``): blocked in this thread, whose mask a worker inherits, and, in the main
-    thread, noted by a handler of their own rather than raised (another thread of the process
-    may receive them). A signal to the process group that lands before a worker's initializer
-    ignores it then waits in the worker and is dropped, instead of raising KeyboardInterrupt
-    in its start-up (a traceback on the command's stderr, or a worker the pool never
-    recorded); the command gets it once the workers are started."""
-    if not hasattr(signal, "pthread_sigmask"):
-        yield
-        return
-    caught: list[int] = []
-    main = threading.current_thread() is threading.main_thread()
-    old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
-    old = {s: signal.signal(s, lambda n, _: caught.append(n)) for s in _STOP_SIGNALS if main}
-    try:
-        yield
-    finally:
-        for s, handler in old.items():
-            signal.signal(s, handler)
-        signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
-        for s in dict.fromkeys(caught):
-            signal.raise_signal(s)
 
 
 def _init_worker(
@@ -71,7 +44,7 @@ def _init_worker(
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
     if hasattr(signal, "pthread_sigmask"):
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)  # held while it started
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)  # held while it started
     _die_with(parent)
     if busy is None:
         set_threads(threads or 1)
@@ -176,7 +149,7 @@ class WorkerPool:
         it starts threads of its own (a progress display), so that they can be forked, and
         they start while it does other work."""
         if self._pool is None:
-            with _stop_signals_held():
+            with stop_signals_held():
                 self._new(self.jobs).submit(os.getpid)
 
     def run(self, tasks: dict[Hashable, Task], then: Then | None = None) -> Results:
@@ -260,7 +233,7 @@ def _collect(
 
     def submit(key: Hashable) -> None:
         try:
-            with _stop_signals_held():
+            with stop_signals_held():
                 pending[pool.submit(_counted, tasks[key])] = key
         except BrokenProcessPool:
             broken.append(key)
