@@ -1,7 +1,8 @@
 """The tasks of a campaign on its executor: scans prepared, links registered, each kept at once.
 
 A :class:`LinkRunner` owns what the tasks give: each scan's summary (and, for an executor
-that ships data, its prepared scan, the last :data:`CACHED_SCANS` of them), the scans that
+that ships data, its prepared scan, the last used of them up to :data:`PREPARED_BYTES`), the
+scans that
 could not be read, and the links, each finished link saved in the link store
 (:mod:`ndt_cli.pipeline.links`) as soon as it comes. Links are keyed by their inputs (the
 scans' content and the configuration), so a link is registered once and, with ``resume``,
@@ -18,6 +19,7 @@ from functools import partial
 from pathlib import Path
 
 from ndt_cli.config.schema import Config
+from ndt_cli.core.arrays import array_bytes
 from ndt_cli.ndt.prepare import PreparedScan
 from ndt_cli.ndt.result import Deeper, Status
 from ndt_cli.pipeline.executors import Executor
@@ -32,7 +34,11 @@ from ndt_cli.pipeline.workers import Failure
 
 progress = logging.getLogger("ndt_cli.progress")
 
-CACHED_SCANS = 48  # prepared scans kept between steps (others are read again)
+# Bytes of prepared scans kept in memory between steps (others are read again): a sparse scan
+# prepared holds about 4 MB, a 2 M-point one 12 MB. A count of scans would be too few for a
+# campaign of hundreds of sparse scans, where a walk's consolidation, which goes through the
+# pairs in order, read every scan twice with 48 kept, and too many for dense ones.
+PREPARED_BYTES = 2 * 1024**3
 
 
 class LinkRunner:
@@ -59,7 +65,8 @@ class LinkRunner:
         self.paths, self.hashes = paths, hashes
         self.resume, self.on_link = resume, on_link
         self.summaries: dict[int, ScanSummary] = {}
-        self.prepared: OrderedDict[int, PreparedScan] = OrderedDict()
+        self.prepared: OrderedDict[int, PreparedScan] = OrderedDict()  # least recently used first
+        self._sizes: dict[int, int] = {}  # bytes of each prepared scan kept
         self.unreadable: dict[int, str] = {}
         self.links: dict[Pair, Link] = {}
         self.tried: list[Link] = []  # every finished registration, the better way round or not
@@ -165,6 +172,7 @@ class LinkRunner:
         for key, value in self.executor.run(tasks, start):
             if key[0] == "scan":
                 self._summarised(key[1], value)
+                self._trim({s for j in waiting.values() for s in (j.target, j.source)})
             else:
                 job = next(j for j in jobs if j.pair == key[1:])
                 if isinstance(value, Failure):  # the worker died or raised: this link fails
@@ -174,8 +182,17 @@ class LinkRunner:
         for job in waiting.values():  # a scan it needs could not be read
             bad = self.unreadable.get(job.target) or self.unreadable.get(job.source) or "?"
             self._finish(job, job.failed(bad), save=False)
-        while len(self.prepared) > CACHED_SCANS:
-            self.prepared.popitem(last=False)
+        self._trim(set())
+
+    def _trim(self, keep: set[int]) -> None:
+        """Forget the least recently used prepared scans, but those in ``keep`` (links waiting
+        for them), until those kept hold :data:`PREPARED_BYTES` or less."""
+        total = sum(self._sizes.values())
+        for i in [i for i in self.prepared if i not in keep]:
+            if total <= PREPARED_BYTES:
+                return
+            del self.prepared[i]
+            total -= self._sizes.pop(i)
 
     def _job(self, k: PlannedLink) -> LinkJob:
         inputs = self.cfg_text + guess_text(k.guess)
@@ -196,6 +213,7 @@ class LinkRunner:
             return
         if value.prepared is not None:
             self.prepared[i] = value.prepared
+            self._sizes[i] = array_bytes(value.prepared)
         if i not in self.summaries:
             self.summaries[i] = replace(value, prepared=None)
             self.store.save_scan(self.scan_key(i), value.preview, value.sketch, value.sample)
