@@ -1,9 +1,8 @@
 """The tasks of a campaign on its executor: scans prepared, links registered, each kept at once.
 
 A :class:`LinkRunner` owns what the tasks give: each scan's summary (and, for an executor
-that ships data, its prepared scan, the last used of them up to :data:`PREPARED_BYTES`), the
-scans that
-could not be read, and the links, each finished link saved in the link store
+that ships data, its prepared scan, those used last up to :data:`PREPARED_BYTES`), the scans
+that could not be read, and the links, each finished link saved in the link store
 (:mod:`ndt_cli.pipeline.links`) as soon as it comes. Links are keyed by their inputs (the
 scans' content and the configuration), so a link is registered once and, with ``resume``,
 taken from the store of an earlier run.
