@@ -12,11 +12,14 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 from benchmarks import data
 from benchmarks.common import RUN_BIN, fmt, table, target
 from ndt_cli import io, sim
 from ndt_cli.analysis import trust
 from ndt_cli.config import Config
+from ndt_cli.core.transforms import transform_errors
 from ndt_cli.pipeline.campaign import Campaign
 from ndt_cli.pipeline.local_pool import WorkerPool
 from ndt_cli.pipeline.verify import NodeStatus
@@ -35,15 +38,32 @@ def _survey_files(survey: sim.Survey, folder: Path) -> list[Path]:
     return files
 
 
-def _campaign(files: list[Path], out: Path) -> tuple[float, Campaign]:
+def _campaign(files: list[Path], out: Path, anchor: int = 0) -> tuple[float, Campaign]:
     t0 = time.perf_counter()
-    campaign = Campaign(Config(), out, WorkerPool(2))
+    campaign = Campaign(Config(), out, WorkerPool(2), anchor=anchor)
     try:
         campaign.add_scans(files)
         result = campaign.result()
     finally:
         campaign.close()
     return time.perf_counter() - t0, (campaign, result)
+
+
+def _walk_index(walk: sim.Survey, other: sim.Survey) -> list[int]:
+    """For each scan of ``other`` (the same scans in another order), its index in ``walk``."""
+    return [next(j for j, P in enumerate(walk.poses) if np.array_equal(P, Q)) for Q in other.poses]
+
+
+def _same_as_walk(walk, result, order: list[int]) -> tuple[int, float]:
+    """Scans whose status equals the walk's, and the largest difference of the poses of scans
+    ok in both in the anchor's cluster (mm; the frame of the walk's first scan)."""
+    same, worst = 0, 0.0
+    for k, scan in enumerate(order):
+        a, b = walk.solution.scans[scan], result.solution.scans[k]
+        same += a.status is b.status
+        if a.status is b.status is NodeStatus.OK and a.cluster == b.cluster == 0:
+            worst = max(worst, 1000 * transform_errors(a.T_world_scan, b.T_world_scan)[1])
+    return same, worst
 
 
 def scaling(
@@ -55,8 +75,10 @@ def scaling(
     print(f"Sparse simulated scans ({RAYS[0]} x {RAYS[1]} rays) 16 m apart along one street, one")
     print("process with two workers; `ok`: scans ok; per scan: wall time, registrations and")
     print("coarse matches divided by the scans; `ok wrong`: scans ok but not right in their")
-    print("cluster's frame (as the trust sweep judges); `clusters`: pieces it ended in.\n")
-    rows, per_scan = [], {}
+    print("cluster's frame (as the trust sweep judges); `clusters`: pieces it ended in; a")
+    print("shuffled campaign is anchored at the walk's first scan, and compared with the walk")
+    print("scan by scan: statuses equal, largest difference of the poses ok in both (mm).\n")
+    rows, per_scan, agree = [], {}, {}
     with tempfile.TemporaryDirectory() as tmp:
         for n in sizes:
             survey = sim.route(seed=5, n_scans=n, rays=RAYS)
@@ -64,8 +86,14 @@ def scaling(
             if n in shuffled:
                 orders.append(("shuffled", sim.shuffled(survey, seed=1)))
             for label, s in orders:
+                order = _walk_index(survey, s)  # anchored at the walk's anchor: comparable
                 files = _survey_files(s, Path(tmp) / f"{label}{n}")
-                wall, (campaign, result) = _campaign(files, Path(tmp) / f"out_{label}{n}")
+                out = Path(tmp) / f"out_{label}{n}"
+                wall, (campaign, result) = _campaign(files, out, order.index(0))
+                if label == "walk":
+                    walk = result
+                same, worst = _same_as_walk(walk, result, order)
+                agree[n] = (n - same, worst)
                 scans = result.solution.scans
                 ok = sum(x.status is NodeStatus.OK for x in scans)
                 clusters = len({x.cluster for x in scans if x.cluster is not None})
@@ -83,11 +111,13 @@ def scaling(
                         fmt(wall / n, ".2f"),
                         fmt(len(campaign.finished) / n, ".2f"),
                         fmt(len(campaign.coarse) / n, ".1f"),
+                        f"{same}/{n}",
+                        fmt(worst, ".1f"),
                     ]
                 )
                 shutil.rmtree(Path(tmp) / f"{label}{n}", ignore_errors=True)
     head = ["scans", "order", "ok", "ok wrong", "clusters", "wall (s)", "s/scan", "regs/scan"]
-    table([*head, "coarse/scan"], rows)
+    table([*head, "coarse/scan", "status as walk", "pose vs walk (mm)"], rows)
     lo, hi = min(sizes), max(sizes)
     growth = per_scan[("walk", hi)] / per_scan[("walk", lo)]
     target(
@@ -100,6 +130,11 @@ def scaling(
     for n in shuffled:
         ratio = per_scan[("shuffled", n)] / per_scan[("walk", n)]
         target(f"{n} scans shuffled: time per scan / in a walk", ratio, 2.0, "<= 2", "x")
+        differ, worst = agree[n]
+        target(f"{n} scans shuffled: scans whose status is not the walk's", differ, 0, "0")
+        target(
+            f"{n} scans shuffled: poses ok in both, largest difference", worst, 5.0, "<= 5", " mm"
+        )
 
 
 def order_ratio() -> None:
