@@ -71,12 +71,15 @@ class ChainProgress:
 
         class TwoLines(Progress):
             """The stage or the link at work on a line of its own (wrapped, never cut: names
-            are long), the bar with its counts below it."""
+            are long), the bar with its counts below it; nothing once hidden (a command
+            stopped by Ctrl-C leaves only its one line)."""
 
             def get_renderables(self) -> Iterator[Any]:
-                for task in self.tasks:
+                shown = [task for task in self.tasks if task.visible]  # none once stopped
+                for task in shown:
                     yield Text(task.description, overflow="fold")
-                yield self.make_tasks_table(self.tasks)
+                if shown:
+                    yield self.make_tasks_table(shown)
 
         self._bar = TwoLines(
             BarColumn(bar_width=None),
