@@ -244,3 +244,23 @@ def test_a_bug_keeps_its_traceback():
 
     with pytest.raises(ImportError, match="a bug"), user_errors("ndt-x", debug=False):
         raise ImportError("a bug")
+
+
+@pytest.mark.parametrize("stopped", [False, True])
+def test_the_progress_display_s_last_frame(stopped):
+    """On a terminal, the progress display's last frame: the stage done with its bar, or,
+    stopped by Ctrl-C, nothing (the link at work no longer drawn: the command's one line
+    follows)."""
+    from ndt_cli.cli.progress import ChainProgress
+
+    progress = ChainProgress(("scan_0.laz", "scan_1.laz"), enabled=True)
+    progress._start_bar()  # what a terminal gets (stderr is not one here)
+    progress.at_work, progress.total = [(0, 1)], 1
+    progress._describe()
+    exc = KeyboardInterrupt() if stopped else None
+    progress.__exit__(type(exc) if exc else None, exc, None)
+    texts = [str(r) for r in progress._bar.get_renderables() if hasattr(r, "plain")]
+    if stopped:
+        assert list(progress._bar.get_renderables()) == []
+    else:
+        assert texts == ["done: 0 registration(s)"]
