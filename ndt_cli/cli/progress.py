@@ -28,6 +28,10 @@ from ndt_cli.cli.common import PROGRESS
 log = logging.getLogger(PROGRESS)
 
 STYLES = {"ok": "green", "suspect": "yellow", "degenerate": "yellow"}  # others: red
+# Columns the bar leaves free at its right: a terminal echoes each Ctrl-C as "^C" where the
+# cursor is, the end of the bar; on a full line the echo wraps, the display loses count of its
+# lines and leaves one behind when it stops
+ECHO_ROOM = 4
 
 
 class _Through(logging.Handler):
@@ -66,6 +70,7 @@ class ChainProgress:
 
     def _start_bar(self) -> None:
         from rich.console import Console
+        from rich.constrain import Constrain
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
         from rich.text import Text
 
@@ -78,8 +83,9 @@ class ChainProgress:
                 shown = [task for task in self.tasks if task.visible]  # none once stopped
                 for task in shown:
                     yield Text(task.description, overflow="fold")
-                if shown:
-                    yield self.make_tasks_table(shown)
+                if shown:  # the terminal echoes Ctrl-C as ^C after the bar: room for two
+                    width = max(self.console.width - ECHO_ROOM, 1)
+                    yield Constrain(self.make_tasks_table(shown), width)
 
         self._bar = TwoLines(
             BarColumn(bar_width=None),
