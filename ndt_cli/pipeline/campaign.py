@@ -327,7 +327,8 @@ class Campaign:
         known positions. A round
         without a join is followed by up to :data:`BRIDGE_ROUNDS` - 1 more for the groups of
         several scans (a piece of the campaign, placed out of order, whose best coarse matches
-        missed), not for a lone scan (a scan that fits nowhere stays alone)."""
+        missed), not for a lone scan (a scan that fits nowhere stays alone); after a join,
+        every group has a round again."""
         fresh = set(new)
         failed = 0
         while failed < BRIDGE_ROUNDS:
