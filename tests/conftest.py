@@ -16,6 +16,13 @@ if os.environ.get("CI") == "true":
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
+# The tests that press Ctrl-C on a command need it to arrive as on a terminal. A suite started
+# in the background (`nohup`, `cmd &` in a script) inherits SIGINT ignored, and every command
+# it starts would too (an ignored signal stays ignored across exec, by the commands' design):
+# the session takes SIGINT as Python does by default, so the commands it starts do as well.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+
 
 @pytest.fixture(autouse=True)
 def _signal_handlers_restored():
