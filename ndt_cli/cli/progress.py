@@ -83,7 +83,7 @@ class ChainProgress:
                 shown = [task for task in self.tasks if task.visible]  # none once stopped
                 for task in shown:
                     yield Text(task.description, overflow="fold")
-                if shown:  # the terminal echoes Ctrl-C as ^C after the bar: room for two
+                if shown:  # the terminal echoes each Ctrl-C as ^C after the bar: room for it
                     width = max(self.console.width - ECHO_ROOM, 1)
                     yield Constrain(self.make_tasks_table(shown), width)
 

@@ -16,6 +16,7 @@ run alone gets every core instead of leaving the others idle.
 from __future__ import annotations
 
 import os
+import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import AbstractContextManager
@@ -79,8 +80,22 @@ def _helpers(n: int) -> ThreadPoolExecutor:
     """The pool of helper threads, started on first use (the caller is one of the threads)."""
     global _pool, _pool_size
     if _pool is None or _pool_size < n:
-        _pool, _pool_size = ThreadPoolExecutor(max_workers=n, thread_name_prefix="kernel"), n
+        _pool, _pool_size = _started(n), n
     return _pool
+
+
+def _started(n: int) -> ThreadPoolExecutor:
+    """A pool of ``n`` helper threads, every one started now, with Ctrl-C and SIGTERM held
+    back: a Python thread pool records a thread only after starting it, and a thread a Ctrl-C
+    left unrecorded would keep the interpreter's exit waiting forever. Once started, the pool
+    starts no thread again (each start here waits until all have)."""
+    pool = ThreadPoolExecutor(max_workers=n, thread_name_prefix="kernel")
+    all_started = threading.Barrier(n + 1)
+    with stop_signals_held():
+        for _ in range(n):
+            pool.submit(all_started.wait)  # busy until all are: each submit starts a thread
+        all_started.wait()
+    return pool
 
 
 def blocks(n_tasks: int, n_threads: int) -> list[tuple[int, int]]:
@@ -94,17 +109,14 @@ def blocks(n_tasks: int, n_threads: int) -> list[tuple[int, int]]:
 def parallel_for(kernel: Callable[..., object], n_tasks: int, *args: object) -> None:
     """Run ``kernel(start, stop, *args)`` on blocks of ``range(n_tasks)``, one per thread of the
     budget; the calling thread runs the first block. ``kernel`` must release the GIL and write
-    only its tasks' outputs. The first exception of a block is raised once all have ended (and
-    a Ctrl-C that came while they started)."""
+    only its tasks' outputs. The first exception of a block is raised once all have ended."""
     parts = blocks(n_tasks, threads())
     if len(parts) == 1:
         kernel(0, n_tasks, *args)
         return
     pool = _helpers(len(parts) - 1)
-    futures = []
+    futures = [pool.submit(kernel, start, stop, *args) for start, stop in parts[1:]]
     try:
-        with stop_signals_held():  # a helper thread started is recorded by its pool
-            futures += [pool.submit(kernel, start, stop, *args) for start, stop in parts[1:]]
         kernel(*parts[0], *args)
     finally:
         errors = [f.exception() for f in futures]
