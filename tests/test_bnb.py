@@ -180,6 +180,45 @@ def test_search_equals_brute_force(seed, k, exclusion, exclusion_deg, window):
         assert found.nodes < scores.size  # pruning happened
 
 
+def _costly(field: bnb.ScoreField, rng: np.random.Generator, share: float, penalty: int):
+    """The field with a random ``share`` of its pixels in free space, each costing ``penalty``."""
+    free = rng.random(field.values.shape) < share
+    return bnb.penalised(field, free, penalty), free
+
+
+def test_a_penalised_field_costs_only_the_free_pixels_no_target_point_is_near():
+    rng = np.random.default_rng(11)
+    field = bnb.likelihood_field(_walls(rng))
+    costly, free = _costly(field, rng, 0.3, 700)
+    assert costly.values.dtype == np.int16
+    cost = free & (field.values == 0)
+    assert cost.any() and (free & (field.values > 0)).any()
+    np.testing.assert_array_equal(costly.values[cost], -700)
+    np.testing.assert_array_equal(costly.values[~cost], field.values[~cost])
+    for bad in (-1, bnb.PENALTY_MAX + 1):
+        with pytest.raises(ValueError, match="penalty"):
+            bnb.penalised(field, free, bad)
+
+
+@pytest.mark.parametrize(("seed", "share", "penalty"), [(12, 0.3, 255), (13, 0.6, 1020)])
+def test_search_on_a_penalised_field_equals_brute_force(seed, share, penalty):
+    rng = np.random.default_rng(seed)
+    target = _walls(rng)
+    source = _moved(_walls(rng, 150), rng.uniform(-2, 2, 2), rng.uniform(-np.pi, np.pi))
+    step, window, k = np.radians(4.0), 5.0, 4
+    field, _ = _costly(bnb.likelihood_field(target), rng, share, penalty)
+    scores = brute_force(field, source, window, step)
+    assert (scores < 0).any()  # the costs reach the search
+    expect = greedy(scores, k, 4, 1)
+    assert len(expect) == k and expect[0][0] > 0
+    kw = {"window": window, "yaw_step": step, "candidates": k, "exclusion": 2.0}
+    kw["exclusion_yaw"] = np.radians(4.0)
+    for kernels in (bnb_kernels.NUMBA, bnb_kernels.NUMPY):
+        found = bnb.search_field(field, source, kernels=kernels, **kw)
+        assert _rows(found) == expect
+        assert found.nodes < scores.size
+
+
 def test_thread_counts_and_numpy_twin_agree_exactly():
     rng = np.random.default_rng(7)
     target = _walls(rng, 600)

@@ -10,15 +10,18 @@ from ndt_cli import sim
 from ndt_cli.config import Config
 from ndt_cli.core.transforms import transform_errors
 from ndt_cli.errors import ConfigError
+from ndt_cli.ndt.bnb import pixel_centres
 from ndt_cli.ndt.coarse_to_fine import Ranked
 from ndt_cli.ndt.prepare import prepare
 from ndt_cli.ndt.register import register_prepared
 from ndt_cli.ndt.result import RegistrationResult
+from ndt_cli.ndt.search import search_field_of
 from ndt_cli.ndt.visibility import (
     MARGIN,
     MIN_HEIGHT,
     RangeImage,
     Sight,
+    free_at_heights,
     free_space_share,
     margin,
     scanner_inside,
@@ -90,6 +93,48 @@ def test_a_tilted_scan_is_checked_above_its_own_ground_and_in_its_own_frame():
     inside = np.array([[2.0, 0.0, 0.0]]) @ R.T  # in the room, in the tilted scanner's frame
     assert sight.image.conflicts(inside) == (1, 1)
     assert Sight.of_scan(prepare(scan + np.array([6.0e5, 5.4e6, 0.0]), Config())) is None
+
+
+def test_free_at_heights_places_each_slice_above_the_ground_of_a_tilted_scan():
+    rng = np.random.default_rng(2)
+    walls = _room() - [0.0, 0.0, 1.5]  # the scanner 1.5 m above the floor
+    floor = np.column_stack([rng.uniform(-5, 5, (40_000, 2)), np.full(40_000, -1.5)])
+    a = np.radians(8.0)
+    R = np.array([[np.cos(a), 0.0, np.sin(a)], [0.0, 1.0, 0.0], [-np.sin(a), 0.0, np.cos(a)]])
+    scan = prepare(np.concatenate([walls, floor]) @ R.T, Config())
+
+    def local_xy(x: float, y: float) -> np.ndarray:  # untilted, from the scanner -> reduced
+        p = R @ np.array([x, y, 0.0])
+        return (scan.to_local() @ np.append(p, 1.0))[:2]
+
+    places = np.array([local_xy(2.0, 0.5), local_xy(8.0, 0.0), local_xy(4.8, -1.0)])
+    free = free_at_heights(scan, places, [1.0, 2.0, 4.0])
+    assert free is not None and free.shape == (3, 3)
+    # in the room at 1 and 2 m: seen empty; 4 m up, the walls (3 m high) show nothing behind
+    assert free[:, 0].tolist() == [True, True, False]
+    assert not free[:, 1].any()  # beyond a wall
+    assert not free[:, 2].any()  # within the margin of a wall
+    far = np.concatenate([walls, floor]) + np.array([6.0e5, 5.4e6, 0.0])  # georeferenced
+    assert free_at_heights(prepare(far, Config()), places, [1.0]) is None
+
+
+def test_the_search_field_costs_free_space_only_when_asked_and_known():
+    rng = np.random.default_rng(3)
+    walls = _room() - [0.0, 0.0, 1.5]
+    floor = np.column_stack([rng.uniform(-5, 5, (40_000, 2)), np.full(40_000, -1.5)])
+    scan = prepare(np.concatenate([walls, floor]), Config())
+    heights = Config().slices.heights
+    plain = search_field_of(scan, 0.5, heights, 0.0)
+    costly = search_field_of(scan, 0.5, heights, 2.0)
+    assert plain.values.dtype == np.uint8 and costly.values.dtype == np.int16
+    free = free_at_heights(scan, pixel_centres(plain), heights).reshape(plain.values.shape)
+    cost = free & (plain.values == 0)
+    assert cost[0].sum() > 100  # the room's inside, 1 m up
+    np.testing.assert_array_equal(costly.values[cost], -2 * 255)
+    np.testing.assert_array_equal(costly.values[~cost], plain.values[~cost])
+    assert search_field_of(scan, 0.5, heights[:2], 2.0).values.dtype == np.uint8
+    away = prepare(np.concatenate([walls, floor]) + np.array([6.0e5, 5.4e6, 0.0]), Config())
+    assert search_field_of(away, 0.5, heights, 2.0).values.dtype == np.uint8
 
 
 def test_a_prepared_scan_builds_its_sight_once_and_ships_it_with_itself():

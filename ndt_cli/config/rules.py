@@ -48,6 +48,7 @@ RANGES: dict[str, tuple[float | None, float | None]] = {
     "search.fallback_ratio": (0.5, 1.0),
     "search.free_space_ratio": (0.0, 100.0),
     "search.free_space_share": (0.0, 1.0),
+    "search.free_space_penalty": (0.0, 100.0),
     "refine.voxel": (0.01, 5.0),
     "refine.max_distance": (0.01, 50.0),
     "refine.min_distance": (0.001, 50.0),

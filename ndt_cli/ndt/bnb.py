@@ -15,7 +15,9 @@ The discretised problem, scored exactly:
   truth on 110, against 105 for the target's NDT score rasterised (2 m cells), 95 for sigma
   2 pixels and 94 for occupancy convolved with a Gaussian: a hit on a sparsely sampled far
   facade counts as much as one on a dense near one, and a miss by a pixel costs.
-  Integer values make every score exact, whatever the order of the sums.
+  Integer values make every score exact, whatever the order of the sums. Optionally
+  (:func:`penalised`) a pixel where the target's scanner saw empty space at its slice's height
+  costs a point landing there instead of counting nothing (``search.free_space_penalty``).
 - **Source points**: each source slice voxel-filtered at ``resolution``, taken relative to the
   source centre ``c_s`` (median of its slice points); a point of slice k scores in field k only.
 - **Yaws**: ``yaw_m = 2 pi m / n_yaw``, ``n_yaw = ceil(2 pi / yaw_step)``; by default the step
@@ -68,14 +70,16 @@ FIELD_MAX = 255  # field value of a pixel that holds a target point
 ROUND = 16  # yaws searched in parallel between two merges of the anchors
 ROOT_LEVEL = 4  # roots are blocks of 2^4 x 2^4 translations: their bounds order the yaws
 FIELD_REACH = 4.0  # the field is built this many sigmas beyond the target's points
+PENALTY_MAX = 32_000  # the most a pixel in free space may cost (int16 values)
 
 
 @dataclass(frozen=True)
 class ScoreField:
-    """Per target slice, a field of scores: ``values[k, a, b]`` (uint8, 0..255) covers the target
-    frame's ``origin + ((a, b) .. (a+1, b+1)) * resolution`` (metres, reduced levelled frame)."""
+    """Per target slice, a field of scores: ``values[k, a, b]`` (uint8, 0..255; int16 with
+    negative values where a point costs, :func:`penalised`) covers the target frame's
+    ``origin + ((a, b) .. (a+1, b+1)) * resolution`` (metres, reduced levelled frame)."""
 
-    values: np.ndarray  # (S, nx, ny) uint8
+    values: np.ndarray  # (S, nx, ny) uint8 or int16
     origin: np.ndarray  # (2,) m: corner of pixel (0, 0)
     resolution: float  # m
     centre: np.ndarray  # (2,) m: median of the target's slice points (PreparedScan.centroid)
@@ -126,10 +130,31 @@ def _falloff(sigma_px: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return dx[keep], dy[keep], v[keep]
 
 
+def pixel_centres(field: ScoreField) -> np.ndarray:
+    """(nx * ny, 2) centres (m, the field's frame) of the field's pixels, in ``values[k]``'s
+    flat order."""
+    _, nx, ny = field.values.shape
+    ax = field.origin[0] + (np.arange(nx) + 0.5) * field.resolution
+    ay = field.origin[1] + (np.arange(ny) + 0.5) * field.resolution
+    X, Y = np.meshgrid(ax, ay, indexing="ij")
+    return np.column_stack([X.ravel(), Y.ravel()])
+
+
+def penalised(field: ScoreField, free: np.ndarray, penalty: int) -> ScoreField:
+    """The field with ``-penalty`` on every pixel of ``free`` (S, nx, ny) bool that no target
+    point is near (value 0): a source point there lands where the target's scanner saw
+    nothing. int16 values; the bounds stay exact (max-pooling bounds negative values too)."""
+    if not 0 <= penalty <= PENALTY_MAX:
+        raise ValueError(f"need 0 <= penalty <= {PENALTY_MAX}")
+    values = field.values.astype(np.int16)
+    values[free & (values == 0)] = -penalty
+    return replace(field, values=values)
+
+
 def max_pyramid(values: np.ndarray, top: int) -> np.ndarray:
     """Levels 0..``top`` of max-pooled fields: ``out[h, k, a, b]`` is the largest of
-    ``values[k, a .. a+2^h-1, b .. b+2^h-1]`` (clipped at the far edges). (S,nx,ny) uint8 in,
-    (top+1, S, nx, ny) uint8 out."""
+    ``values[k, a .. a+2^h-1, b .. b+2^h-1]`` (clipped at the far edges). (S,nx,ny) in,
+    (top+1, S, nx, ny) of the same integer type out."""
     out = np.empty((top + 1, *values.shape), values.dtype)
     out[0] = values
     for h in range(1, top + 1):

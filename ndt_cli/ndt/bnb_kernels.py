@@ -4,9 +4,10 @@ A *node* is a block of ``2^h x 2^h`` lattice translations ``(i0 .. i0+2^h-1, j0 
 one yaw. Its bound is ``sum_k P_h[slice_k, qx_k + i0, qy_k + j0]``: ``P_h`` is the field max-pooled
 over ``2^h x 2^h`` pixels (level ``h`` of the pyramid, :func:`ndt_cli.ndt.bnb.max_pyramid`) and
 ``(qx_k, qy_k)`` the pixel of source point ``k`` at that yaw and translation (0, 0). The kernels
-read the pyramid as one flat uint8 array: ``flat[h * level_size + base_k + i0 * ny + j0]``, with
-``base_k = (slice_k * nx + qx_k) * ny + qy_k`` precomputed per yaw (every read is in bounds by
-construction). At ``h = 0`` the bound is the exact score of the translation.
+read the pyramid as one flat integer array (uint8, or int16 where free space costs):
+``flat[h * level_size + base_k + i0 * ny + j0]``, with ``base_k = (slice_k * nx + qx_k) * ny +
+qy_k`` precomputed per yaw (every read is in bounds by construction). At ``h = 0`` the bound
+is the exact score of the translation.
 
 Everything here is integer arithmetic, so the Numba kernels and the numpy twins agree bit for
 bit, and a round's tasks (one yaw each) are independent, so results do not depend on threads.
@@ -34,7 +35,7 @@ POOL_CAP = 4096  # leaves a task records before its buffer overflows (it is then
 class Lattice:
     """What every task reads: the flat pyramid and the sizes of the search (all integers)."""
 
-    flat: np.ndarray  # (levels * level_size,) uint8
+    flat: np.ndarray  # (levels * level_size,) uint8 or int16
     level_size: int  # slices * nx * ny
     ny: int
     top: int  # level of the root blocks

@@ -138,7 +138,7 @@ def _search(
     cells, s = cfg.grid.cell_sizes, cfg.search
     stages, candidates = [], []
     if s.method == "bnb":
-        found = global_start(target, source, s, kernels)
+        found = global_start(target, source, s, kernels, cfg.slices.heights)
         stages.append(found.level)
         candidates.append(found.candidates)
         if len(found.candidates) and found.ratio < s.fallback_ratio:
@@ -226,7 +226,7 @@ def _deeper(
     the search do not depend on how many are asked, so the new ones are the poses after those
     refined."""
     more = replace(cfg.search, bnb_candidates=DEEPER_CANDIDATES)
-    found = global_start(target, source, more, kernels)
+    found = global_start(target, source, more, kernels, cfg.slices.heights)
     extra = found.candidates[start.searched :]
     if len(extra) == 0:
         return refined

@@ -18,17 +18,27 @@ search points (``search.points_per_slice`` per slice) per iteration.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ndt_cli.config.schema import OptimizerConfig, SearchConfig
 from ndt_cli.core.transforms import pose2d_matrix, wrap_angle, yaw_of
 from ndt_cli.ndt.backend import Kernels
-from ndt_cli.ndt.bnb import global_search
+from ndt_cli.ndt.bnb import (
+    FIELD_MAX,
+    PENALTY_MAX,
+    ScoreField,
+    likelihood_field,
+    penalised,
+    pixel_centres,
+    search_field,
+)
 from ndt_cli.ndt.levels import SourceSampler, TargetMaps, level_stats, run_level
 from ndt_cli.ndt.prepare import PreparedScan
 from ndt_cli.ndt.result import LevelStats
+from ndt_cli.ndt.visibility import free_at_heights
 
 MIN_SEPARATION_DEG = 10.0  # poses closer than this in yaw and half a cell apart are one
 
@@ -84,19 +94,42 @@ class StartSearch:
     ratio: float = float("nan")
 
 
+def search_field_of(
+    target: PreparedScan, resolution: float, heights: Sequence[float], penalty: float
+) -> ScoreField:
+    """The target's likelihood field at ``resolution`` m; with ``penalty`` > 0 (points on a
+    target pixel) and a scanner whose sight is known, a point landing in space it saw empty at
+    the slice's height (``heights``, m above the ground, one per slice) costs that much."""
+    field = likelihood_field(target.slices, resolution=resolution)
+    if penalty <= 0 or len(heights) != field.values.shape[0]:
+        return field
+    free = free_at_heights(target, pixel_centres(field), heights)
+    if free is None:
+        return field
+    cost = round(min(penalty * FIELD_MAX, PENALTY_MAX))
+    return penalised(field, free.reshape(field.values.shape), cost)
+
+
 def global_start(
-    target: PreparedScan, source: PreparedScan, search: SearchConfig, kernels: Kernels
+    target: PreparedScan,
+    source: PreparedScan,
+    search: SearchConfig,
+    kernels: Kernels,
+    heights: Sequence[float] = (),
 ) -> StartSearch:
-    """The best distinct poses of the exact global search (:mod:`ndt_cli.ndt.bnb`)."""
-    found = global_search(
-        target.slices,
+    """The best distinct poses of the exact global search (:mod:`ndt_cli.ndt.bnb`); ``heights``
+    (m above the ground, one per slice) place the slices for ``search.free_space_penalty``."""
+    t0 = time.perf_counter()
+    field = search_field_of(target, search.bnb_resolution, heights, search.free_space_penalty)
+    found = search_field(
+        field,
         source.slices,
-        resolution=search.bnb_resolution,
         window=search.bnb_window,
         candidates=search.bnb_candidates,
         exclusion=search.bnb_exclusion,
         kernels=kernels.search,
     )
+    found = replace(found, time_s=time.perf_counter() - t0)
     best = float(found.scores[0]) if len(found.scores) else 0.0
     level = LevelStats(
         search.bnb_resolution,

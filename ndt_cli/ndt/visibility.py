@@ -34,6 +34,7 @@ alone). Figures: docs/trust.md.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -132,6 +133,30 @@ class Sight:
             return None
         levelled = scan.points3d @ scan.level.T
         return cls.of(points, levelled[:, 2] - scan.terrain.at(levelled[:, :2]))
+
+
+def free_at_heights(
+    scan: PreparedScan, xy: np.ndarray, heights: Sequence[float], margin: float = MARGIN
+) -> np.ndarray | None:
+    """(len(heights), N) bool: whether the place at each (N,2) ``xy`` (the scan's reduced,
+    levelled frame, m) and each height above its ground (m) lies more than ``margin`` m in
+    front of what the scanner saw in that direction and around it: space it saw empty. None
+    when the scan cannot say what it saw (:meth:`Sight.of_scan`)."""
+    sight = scan.sight
+    if sight is None:
+        return None
+    xy = np.reshape(xy, (-1, 2))
+    ground = scan.terrain.at(xy)
+    F = scan.from_local()
+    out = np.zeros((len(heights), len(xy)), dtype=bool)
+    image = sight.image
+    for k, h in enumerate(heights):
+        local = np.column_stack([xy, ground + h])
+        p = local @ F[:3, :3].T + F[:3, 3]
+        r = _ranges(p)
+        seen = image.guard[_bins(p, r, image.n_az, image.n_el)]
+        out[k] = np.isfinite(seen) & (r < seen - margin)
+    return out
 
 
 SCANNER_MARGIN = 1.0  # m: a scan of one sector has its scanner at the sector's apex, its edge
