@@ -410,6 +410,21 @@ def test_the_screen_fits_the_terminal_and_never_cuts_a_name(width):
     assert "checked, residual 0.8 cm" in flat and "not checked" in flat
 
 
+@pytest.mark.parametrize("terminal", [True, False])
+def test_the_summary_after_ctrl_c_starts_below_the_terminals_echo(terminal):
+    from rich.console import Console
+
+    from ndt_cli.cli.watch_screen import Screen
+
+    buf = io.StringIO()
+    screen = Screen(console=Console(file=buf, width=80, force_terminal=terminal))
+    screen.show(_all_events()[-1])
+    first = buf.getvalue().split("\n")[0]
+    # on a terminal "^C" was echoed where the cursor stood: the summary starts a line below it
+    assert (first == "") is terminal
+    assert "stopped (Ctrl-C)" in buf.getvalue()
+
+
 def test_quiet_shows_only_what_needs_the_operator():
     from rich.console import Console
 

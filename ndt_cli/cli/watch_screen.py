@@ -56,6 +56,8 @@ class Screen:
             return
         if self.quiet and not _needs_you(event):
             return
+        if isinstance(event, Stopped) and event.why == "interrupted" and self.console.is_terminal:
+            self.console.print()  # the terminal echoed the Ctrl-C as "^C": a line of its own
         for line in lines(event):
             self._print(line)
 
