@@ -71,16 +71,25 @@ class RangeImage:
         np.minimum.at(ranges, _bins(points, r, n_az, n_el), r)
         return cls(ranges, n_az, n_el, _guard(ranges.reshape(n_az, n_el)).ravel())
 
+    def in_front(
+        self, points: np.ndarray, margin: float = MARGIN, around: bool = True
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Per (N,3) point in this scanner's frame (m): whether it lies more than ``margin`` m
+        in front of the surfaces seen in its direction bin (and in the bins around it when
+        ``around``), and whether its direction was measured at all; (N,) bool each."""
+        r = _ranges(points)
+        seen = (self.guard if around else self.ranges)[_bins(points, r, self.n_az, self.n_el)]
+        measured = np.isfinite(seen)
+        return measured & (r < seen - margin), measured
+
     def conflicts(
         self, points: np.ndarray, margin: float = MARGIN, around: bool = True
     ) -> tuple[int, int]:
         """(points more than ``margin`` m in front of the surfaces seen in their direction bin,
         and in the bins around it when ``around``, points whose direction was measured) of (N,3)
         points in this scanner's frame (m)."""
-        r = _ranges(points)
-        seen = (self.guard if around else self.ranges)[_bins(points, r, self.n_az, self.n_el)]
-        measured = np.isfinite(seen)
-        return int((measured & (r < seen - margin)).sum()), int(measured.sum())
+        front, measured = self.in_front(points, margin, around)
+        return int(front.sum()), int(measured.sum())
 
 
 def _guard(image: np.ndarray) -> np.ndarray:
@@ -149,13 +158,9 @@ def free_at_heights(
     ground = scan.terrain.at(xy)
     F = scan.from_local()
     out = np.zeros((len(heights), len(xy)), dtype=bool)
-    image = sight.image
     for k, h in enumerate(heights):
         local = np.column_stack([xy, ground + h])
-        p = local @ F[:3, :3].T + F[:3, 3]
-        r = _ranges(p)
-        seen = image.guard[_bins(p, r, image.n_az, image.n_el)]
-        out[k] = np.isfinite(seen) & (r < seen - margin)
+        out[k] = sight.image.in_front(local @ F[:3, :3].T + F[:3, 3], margin)[0]
     return out
 
 
