@@ -18,7 +18,7 @@ from ndt_cli.pipeline.covariance import (
     se3_log,
     sqrt_information,
 )
-from ndt_cli.pipeline.graph import Edge, bridges, components
+from ndt_cli.pipeline.graph import Edge, bridges, components, uncheckable
 from ndt_cli.pipeline.verify import EdgeState, NodeStatus, _node_verdicts, verify
 
 N_MC = 20_000
@@ -578,3 +578,50 @@ def test_links_weak_along_one_direction_leave_the_scans_suspect_however_well_the
     assert result.statuses()[0] is NodeStatus.OK
     assert all(s is NodeStatus.SUSPECT for s in result.statuses()[1:])
     assert all("not pinned down" in n.reason for n in result.nodes[1:])
+
+
+@pytest.mark.parametrize("closer_fixes_position", [False, True])
+def test_a_cycle_closed_by_a_degenerate_link_checks_no_position(closer_fixes_position):
+    """Two pieces of a street, each with its cycles, joined by one wrong link (the second
+    piece turned by 180 degrees and 60 m off) and a second link that agrees with the wrong
+    one. Where that second link is degenerate (it fixes the rotation and the height, not where
+    the scans are horizontally), their cycle checks no position: with no bridge trusted, the
+    wrong link is not checkable and no scan of the second piece is ok. The same cycle closed
+    by a link that fixes the position confirms the pair (they agree): what the test tells
+    apart is the degenerate link alone."""
+    rng = np.random.default_rng(31)
+    truth = street(rng)
+    W = pose2d_matrix(60.0, 4.0, np.pi)  # where the wrong links put the second piece
+    pieces = [(0, 1), (1, 2), (0, 2), (2, 3), (1, 3), (4, 5), (5, 6), (4, 6), (6, 7), (5, 7)]
+    edges = [measured(truth, i, j, rng) for i, j in pieces]
+    for i, j, fixes in [(3, 4, True), (2, 5, closer_fixes_position)]:
+        C = link_covariance(rng)
+        if not fixes:
+            C[3, 3] += 1e4  # horizontal translation in the source's frame: unknown
+            C[4, 4] += 1e4
+        T = np.linalg.inv(truth[i]) @ W @ truth[j]
+        edges.append(Edge(i, j, T, C, trusted=fixes, horizontal=fixes))
+    result = verify(8, 0, edges, trust_bridges=False)
+    wrong = result.edges[len(pieces)]
+    assert all(s is NodeStatus.OK for s in result.statuses()[:4])
+    if closer_fixes_position:
+        assert wrong.state is EdgeState.CONFIRMED
+    else:
+        assert wrong.state is EdgeState.UNUSED and "not checkable" in wrong.reason
+        assert not any(s is NodeStatus.OK for s in result.statuses()[4:])
+
+
+def test_uncheckable_edges_of_a_small_graph():
+    """A triangle closed by a degenerate edge leaves its other two edges uncheckable; with a
+    second, horizontal closer they are on a checking cycle again."""
+    cov = np.eye(6) * 1e-4
+    flat = Edge(2, 0, np.eye(4), cov, horizontal=False)
+    edges = [
+        Edge(0, 1, np.eye(4), cov),
+        Edge(1, 2, np.eye(4), cov),
+        flat,
+        Edge(0, 2, np.eye(4), cov),
+    ]
+    assert uncheckable(3, edges, [0, 1, 2]) == {0, 1}
+    assert bridges(3, edges, [0, 1, 2]) == set()
+    assert uncheckable(3, edges, [0, 1, 2, 3]) == set()

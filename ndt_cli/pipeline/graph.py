@@ -25,13 +25,15 @@ CHI2_6_999 = 22.457744  # chi-square quantile, 6 degrees of freedom, p = 0.999
 class Edge:
     """A link: ``T_target_source`` (4x4, reduced frames, ``p_target = T @ p_source``) and its
     6x6 ``covariance`` (right perturbation, source body frame; rad and m). ``trusted``: the
-    link's own quality gate passed (ok status)."""
+    link's own quality gate passed (ok status). ``horizontal`` False: the link says nothing
+    of where its scans are horizontally (degenerate; its rotation and height count)."""
 
     target: int
     source: int
     T_target_source: np.ndarray
     covariance: np.ndarray
     trusted: bool = True
+    horizontal: bool = True
 
     def __post_init__(self) -> None:
         T = np.asarray(self.T_target_source, dtype=float)
@@ -137,6 +139,15 @@ def bridges(n_nodes: int, edges: Sequence[Edge], ids: Sequence[int]) -> set[int]
                     if low[v] > disc[u]:
                         out.add(via)
     return out
+
+
+def uncheckable(n_nodes: int, edges: Sequence[Edge], ids: Sequence[int]) -> set[int]:
+    """The ids of the edges (among ``ids``) that no cycle of those edges can check: the
+    :func:`bridges`, and the horizontal edges on no cycle of horizontal edges. A cycle that
+    a degenerate edge closes checks no horizontal position: two wrong links that put a
+    piece of street turned or shifted the same way would agree around it, trivially."""
+    level = [k for k in ids if edges[k].horizontal]
+    return bridges(n_nodes, edges, ids) | bridges(n_nodes, edges, level)
 
 
 def _step(edge: Edge, pose: np.ndarray, from_node: int) -> np.ndarray:

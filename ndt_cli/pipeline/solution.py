@@ -306,7 +306,9 @@ def _fits(links: Sequence[Link], net: _Network) -> tuple[LinkFit, ...]:
 def _edge(link: Link) -> Edge:
     """A link's kept pose as an edge of the pose graph (between the reduced frames)."""
     r = link.result
-    return Edge(link.target, link.source, r.T_reduced, link_covariance(r), trusted=link.ok)
+    flat = link.status is Status.DEGENERATE  # where its scans are horizontally: unknown
+    T, cov = r.T_reduced, link_covariance(r)
+    return Edge(link.target, link.source, T, cov, trusted=link.ok, horizontal=not flat)
 
 
 def _hypotheses(link: Link, k: int) -> list[Hypothesis]:

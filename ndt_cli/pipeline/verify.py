@@ -16,7 +16,9 @@ ranking and its removal costs that much more (never in the test).
 - A kept link on a cycle of kept links is **confirmed**, whatever its gate said: the cycle
   checked it.
 - A kept link on no cycle (a bridge) cannot be checked: it is **used** when its own gate passed,
-  and **unused** otherwise; scans behind an unused link are suspect, never ok.
+  and **unused** otherwise; scans behind an unused link are suspect, never ok. A link that fixes
+  where its scans are horizontally and lies only on cycles that a degenerate link closes is
+  such a bridge too (:func:`~ndt_cli.pipeline.graph.uncheckable`).
 - A link that disagrees is **rejected**.
 
 A scan is **ok** when kept links tie it to its cluster's first scan and the adjustment pins
@@ -45,6 +47,7 @@ from ndt_cli.pipeline.graph import (
     components,
     compose,
     residuals,
+    uncheckable,
 )
 from ndt_cli.pipeline.marginals import UNDETERMINED_VAR
 
@@ -193,7 +196,7 @@ class _Verifier:
         self.solver, self.trial, self.edges = solver, trial, solver.edges
         self.threshold = threshold
         self.kept: set[int] = set()
-        self.born_bridges = bridges(solver.n, self.edges, range(len(self.edges)))
+        self.born_bridges = uncheckable(solver.n, self.edges, range(len(self.edges)))
         self.rejected: dict[int, str] = {}
         self.last: dict[int, EdgeResidual] = {}  # the Cauchy solution's residuals
         self.convex: dict[int, EdgeResidual] = {}  # the Huber solution's
@@ -263,24 +266,28 @@ class _Verifier:
     def drop_untrusted_bridges(self, trust_bridges: bool = True) -> set[int]:
         """Kept bridges whose own gate failed (every bridge, unless ``trust_bridges``) leave
         the kept set (they cannot be checked); returns them."""
-        free = bridges(self.solver.n, self.edges, sorted(self.kept))
+        free = uncheckable(self.solver.n, self.edges, sorted(self.kept))
         weak = {k for k in free if not (trust_bridges and self.edges[k].trusted)}
         self.kept -= weak
         return weak
 
     def states(self, unchecked: set[int]) -> list[tuple[EdgeState, str]]:
         """Final state and reason of every edge."""
-        free = bridges(self.solver.n, self.edges, sorted(self.kept))
+        free = uncheckable(self.solver.n, self.edges, sorted(self.kept))
         out = []
         for k in range(len(self.edges)):
             if k in self.rejected:
                 out.append((EdgeState.REJECTED, self.rejected[k]))
             elif k in unchecked:
                 why = "its own gate failed" if not self.edges[k].trusted else "no bridge is trusted"
-                text = f"a bridge (on no cycle of kept links) and {why}: not checkable"
+                text = (
+                    f"a bridge (on no cycle of kept links that checks it) and {why}: not checkable"
+                )
                 out.append((EdgeState.UNUSED, text))
             elif k in free and k in self.born_bridges:
-                out.append((EdgeState.USED, "a bridge (on no cycle of links): its gate's word"))
+                out.append(
+                    (EdgeState.USED, "a bridge (on no cycle that checks it): its gate's word")
+                )
             elif k in free:
                 text = "a bridge once links of its cycles were rejected: which was wrong is "
                 out.append((EdgeState.USED, text + "ambiguous; its gate's word"))
