@@ -18,10 +18,12 @@ from ndt_cli.config.schema import Config
 from ndt_cli.core.transforms import pose2d_matrix
 from ndt_cli.io.writers import write
 from ndt_cli.ndt.prepare import load_and_prepare
-from ndt_cli.ndt.register import register_prepared
+from ndt_cli.ndt.register import Guess, register_prepared
 from ndt_cli.ndt.result import Deeper
-from ndt_cli.pipeline.links import Link
+from ndt_cli.pipeline.links import Link, skipped_key
+from ndt_cli.pipeline.network import LinkKind
 from ndt_cli.pipeline.result import Dropped, tried_links
+from ndt_cli.pipeline.tasks import LinkJob, register_link
 from ndt_cli.sim.worlds import StreetWorld, scan_street
 
 ROT_DEG, TRANS_M = 0.1, 0.05
@@ -109,6 +111,14 @@ def test_a_probe_leaves_the_deeper_search_to_the_plan(tmp_path):
     tried = [Link(1, 0, 1, "probe", probe), Link(2, 1, 0, "reverse", probe)]
     why = [t.why for t in tried_links(tried, [link], set())]
     assert why == [Dropped.SEARCHED_AGAIN, Dropped.OTHER_WAY]
+    # a probe with a guess near the truth: the guess's result is kept (ok, at the truth), but
+    # the search skipped its deeper round, so the link is filed as a probe, for the plan to redo
+    near = Guess(ref @ pose2d_matrix(0.5, -0.4, np.radians(2.0)))
+    job = LinkJob(0, 0, 1, "full", LinkKind.FOUND, near, deep=False)
+    guessed = register_link(job, t, s, cfg)
+    assert guessed.ok and guessed.skipped_deeper and guessed.key == skipped_key("full")
+    rot, trans = _errors(guessed.result.T_target_source, ref)
+    assert rot < ROT_DEG and trans < TRANS_M
 
 
 @pytest.mark.slow

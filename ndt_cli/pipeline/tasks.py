@@ -19,6 +19,7 @@ from ndt_cli.io.multiscan import split_spec
 from ndt_cli.ndt.overlap import Sketch, sketch
 from ndt_cli.ndt.prepare import PreparedScan, load_and_prepare
 from ndt_cli.ndt.register import Guess, register_prepared
+from ndt_cli.ndt.result import Deeper
 from ndt_cli.pipeline.guesses import better
 from ndt_cli.pipeline.links import Link, skipped_key
 from ndt_cli.pipeline.network import LinkKind
@@ -115,11 +116,16 @@ def summarise_scan(path: Path, cfg: Config, ship: bool) -> ScanSummary | Failure
 
 def register_link(job: LinkJob, target: PreparedScan, source: PreparedScan, cfg: Config) -> Link:
     """Register prepared scan ``source`` onto ``target``: by the search, and with a guess
-    from it too, the better kept (:func:`~ndt_cli.pipeline.guesses.better`)."""
+    from it too, the better kept (:func:`~ndt_cli.pipeline.guesses.better`). A probe whose
+    search skipped its deeper round is filed as a probe whichever result is kept: the deeper
+    round may find a rival the guess's result never met."""
     try:
-        result = register_prepared(target, source, cfg, deeper=job.deep)
+        searched = register_prepared(target, source, cfg, deeper=job.deep)
+        result = searched
         if job.guess is not None:
-            result = better(result, register_prepared(target, source, cfg, init=job.guess))
+            result = better(searched, register_prepared(target, source, cfg, init=job.guess))
+        if searched.deeper is Deeper.SKIPPED:
+            result = replace(result, deeper=Deeper.SKIPPED)
     except NdtError as exc:
         return job.failed(str(exc))
     link = Link(job.index, job.target, job.source, job.key, result, kind=job.kind)
