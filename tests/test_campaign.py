@@ -262,7 +262,11 @@ def test_a_shuffled_route_is_placed_by_its_coarse_matches_with_the_same_poses(tm
     walk = run_chain(_write(tmp_path / "walk", route), Config(), tmp_path / "a", jobs=2)
     with caplog.at_level("INFO", logger="ndt_cli.progress"):
         files = _write(tmp_path / "mixed", mixed)
-        shuffled = run_chain(files, Config(), tmp_path / "b", jobs=2, anchor=order.index(0))
+        # in the walk's folder: a pair both register is taken from its store (links are keyed
+        # by the scans' content, and a registration gives the same link again)
+        shuffled = run_chain(
+            files, Config(), tmp_path / "a", jobs=2, anchor=order.index(0), resume=True
+        )
     assert any("no hint" in r.getMessage() for r in caplog.records)
     assert shuffled.solution.roots == {0: order.index(0)}  # one cluster, in the anchor's frame
     ok_links: dict[int, list[int]] = {}  # per scan, the scans its ok links reach

@@ -317,12 +317,20 @@ def _reused_every_kept_link(out: Path, before: dict[str, bytes]) -> bool:
     return unchanged and json.loads((out / "summary.json").read_text())["reused"] >= 1
 
 
+@pytest.fixture(scope="module")
+def street6_clean(street6, tmp_path_factory):
+    """The outputs of an uninterrupted chain of the six scans (every kill point's reference)."""
+    clean = tmp_path_factory.mktemp("clean")
+    assert runner.invoke(chain_app, [*map(str, street6), "-o", str(clean), "-q"]).exit_code == 0
+    return clean
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("kill_after", [1, 3])
-def test_sigkill_at_several_points_then_resume_equals_clean_run(street6, tmp_path, kill_after):
-    files = street6
-    clean, out = tmp_path / "clean", tmp_path / "killed"
-    assert runner.invoke(chain_app, [*map(str, files), "-o", str(clean), "-q"]).exit_code == 0
+def test_sigkill_at_several_points_then_resume_equals_clean_run(
+    street6, street6_clean, tmp_path, kill_after
+):
+    files, clean, out = street6, street6_clean, tmp_path / "killed"
     proc = subprocess.Popen(
         [*CHAIN, *map(str, files), "-o", str(out), "-j", "1", "-q"], start_new_session=True
     )
