@@ -175,7 +175,7 @@ def _link(k: LinkNote) -> str:
     if k.checked:
         state = f"[green]checked[/], residual {k.residual_cm:.1f} cm"
     elif k.state.value == "used":
-        state = "[yellow]not checked[/] (on no cycle)"
+        state = "[yellow]not checked[/] (no cycle checks it)"
     else:
         word = "rejected" if k.state.value == "rejected" else "not kept"
         state = word + (f": {_esc(k.reason)}" if k.reason else "")

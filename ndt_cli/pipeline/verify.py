@@ -59,7 +59,7 @@ class EdgeState(StrEnum):
     """What :func:`verify` made of a link.
 
     ``confirmed``: on a cycle of kept links, within the threshold; ``used``: kept on its own
-    gate's word (a bridge: no cycle of kept links passes through it); ``rejected``: it
+    gate's word (a bridge: no cycle of kept links checks it); ``rejected``: it
     disagrees with the links kept; ``unused``: neither checkable nor ok by its gate (a bridge
     whose gate failed, or its scans are not posed together), left out.
     """
