@@ -112,7 +112,7 @@ def test_a_probe_leaves_the_deeper_search_to_the_plan(tmp_path):
     why = [t.why for t in tried_links(tried, [link], set())]
     assert why == [Dropped.SEARCHED_AGAIN, Dropped.OTHER_WAY]
     # a probe with a guess near the truth: the guess's result is kept (ok, at the truth), but
-    # the search skipped its deeper round, so the link is filed as a probe, for the plan to redo
+    # the search skipped its deeper round: stored as a probe, never taken for the full link
     near = Guess(ref @ pose2d_matrix(0.5, -0.4, np.radians(2.0)))
     job = LinkJob(0, 0, 1, "full", LinkKind.FOUND, near, deep=False)
     guessed = register_link(job, t, s, cfg)

@@ -117,8 +117,9 @@ def summarise_scan(path: Path, cfg: Config, ship: bool) -> ScanSummary | Failure
 def register_link(job: LinkJob, target: PreparedScan, source: PreparedScan, cfg: Config) -> Link:
     """Register prepared scan ``source`` onto ``target``: by the search, and with a guess
     from it too, the better kept (:func:`~ndt_cli.pipeline.guesses.better`). A probe whose
-    search skipped its deeper round is filed as a probe whichever result is kept: the deeper
-    round may find a rival the guess's result never met."""
+    search skipped its deeper round is stored as a probe whichever result is kept, and says
+    so: a full registration of the pair (the deeper round may find a rival the guess's result
+    never met) is never taken from it."""
     try:
         searched = register_prepared(target, source, cfg, deeper=job.deep)
         result = searched
