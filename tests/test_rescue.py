@@ -6,11 +6,13 @@
 from __future__ import annotations
 
 import csv
+import datetime
 import json
 import subprocess
 import sys
 from pathlib import Path
 
+import laspy
 import numpy as np
 import pytest
 
@@ -121,10 +123,27 @@ def test_a_probe_leaves_the_deeper_search_to_the_plan(tmp_path):
     assert rot < ROT_DEG and trans < TRANS_M
 
 
+# The LAS header holds the day a file was written, so the files' bytes, and with them which
+# scan is a link's target, change with the day. From the files written on the second day the
+# chain is ok and 3 m off: a known trust hole (see the xfail's reason).
+HOLE = pytest.mark.xfail(
+    strict=True,
+    reason="known trust hole: the guess (the default --init-sigma, 1 m / 5 deg) is refined "
+    "from 5 m cells and slides 3.3 m along this busy street, and its gate passes it",
+)
+
+
 @pytest.mark.slow
-def test_ndt_chain_places_the_scan_from_approximate_poses(tmp_path):
+@pytest.mark.parametrize(
+    "day", [datetime.date(2026, 11, 26), pytest.param(datetime.date(2026, 11, 28), marks=HOLE)]
+)
+def test_ndt_chain_places_the_scan_from_approximate_poses(tmp_path, day):
     """Scans 39 m apart: the search's candidates near the truth end 2.9 m from it."""
     files, poses, ref = _pair(tmp_path, 15, 0, 1)
+    for path in files:  # the files' bytes fixed (above)
+        las = laspy.read(path)
+        las.header.creation_date = day
+        las.write(path)
     rng = np.random.default_rng(1)
     lines = []
     for path, T in zip(files, poses, strict=True):
