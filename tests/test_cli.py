@@ -77,8 +77,9 @@ def test_init_sigma_sets_where_the_guess_starts_and_a_bad_one_is_one_line(pair, 
     wide = runner.invoke(register_app, [*args, "--init-sigma", "4,1", "-o", str(tmp_path / "w")])
     assert wide.exit_code == 0, wide.output
     levels = json.loads(wide.stdout)["levels"]
-    # 4 m: the first cell of at least 8 m; 1 degree: the guess's heading alone
-    assert [lv["cell_size"] for lv in levels] == [10.0, 5.0, 2.0, 1.0]
+    # 4 m: the first cell of at least 8 m; 1 degree: the guess's heading alone; then a local
+    # search at 2 m cells within the 4 m, and every pose it found refined from 2 m on
+    assert [lv["cell_size"] for lv in levels] == [10.0, 5.0, 2.0, 2.0, 1.0]
     for bad in ("1", "1,x", "0,5", "1,200", "nan,5"):
         res = runner.invoke(register_app, [*args, "--init-sigma", bad, "-o", str(tmp_path / "b")])
         assert res.exit_code == 2 and "--init-sigma" in res.output, (bad, res.output)

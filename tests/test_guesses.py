@@ -8,6 +8,8 @@ import pytest
 
 from ndt_cli.core.transforms import pose2d_matrix
 from ndt_cli.errors import ConfigError, InputError
+from ndt_cli.ndt.coarse_to_fine import Ranked
+from ndt_cli.ndt.guess import Guess, beyond_text, reach_of, within
 from ndt_cli.ndt.result import Status
 from ndt_cli.pipeline.guesses import (
     better,
@@ -83,11 +85,27 @@ def test_a_pairs_row_may_carry_a_guess(tmp_path):
         pair_pose(["far.txt"], tmp_path)
 
 
-def test_two_approximate_poses_guess_their_pair_within_root_two_sigma():
+def test_two_approximate_poses_guess_their_pair_with_the_spread_of_their_errors():
+    """The pair's sigma against a Monte Carlo reference: both poses' errors drawn with the
+    given spread (each position's rms error 1 m, heading 5 degrees, about the scanner), the
+    rms error of the pair's pose. The target's heading error moves the source, 30 m away,
+    across the line between them: the position's sigma is 2.9 m, not sqrt(2) m."""
     W = {0: pose2d_matrix(10, 5, 0.3), 1: pose2d_matrix(40, 9, 1.2)}
     g = relative(W, 0, 1, (1.0, 5.0))
     np.testing.assert_allclose(W[0] @ g.T_target_source, W[1], atol=1e-12)
-    assert g.sigma_m == pytest.approx(np.sqrt(2)) and g.sigma_deg == pytest.approx(5 * np.sqrt(2))
+    rng = np.random.default_rng(3)
+    moved, trans, yaw = [], [], []
+    for _ in range(5_000):
+        moved = [
+            W[k] @ pose2d_matrix(*rng.normal(0, np.sqrt(0.5), 2), np.radians(rng.normal(0, 5)))
+            for k in (0, 1)
+        ]
+        d = np.linalg.inv(g.T_target_source) @ np.linalg.inv(moved[0]) @ moved[1]
+        trans.append(np.hypot(*d[:2, 3]))
+        yaw.append(np.degrees(np.arctan2(d[1, 0], d[0, 0])))
+    assert g.sigma_m == pytest.approx(np.sqrt(np.mean(np.square(trans))), rel=0.03)
+    assert g.sigma_deg == pytest.approx(np.sqrt(np.mean(np.square(yaw))), rel=0.03)
+    assert g.sigma_m > 2.5  # the premise: far more than sqrt(2) m at 30 m
     assert relative(W, 0, 2, (1.0, 5.0)) is None
 
 
@@ -107,3 +125,31 @@ def test_the_result_kept_is_the_ok_one_then_the_higher_score():
     assert better(_R(False, 300.0), _R(True, 100.0)).score == 100.0
     tie = _R(True, 400.0)
     assert better(tie, _R(True, 400.0)) is tie
+
+
+def test_a_guess_allows_the_poses_within_three_times_its_uncertainty():
+    """Reach in the scans' reduced frames: the source's origin within 3 sigma_m of where the
+    guess puts it, the heading within 3 sigma_deg (any heading when it is 45 degrees or more);
+    the candidates outside are dropped unless none is inside."""
+    p0 = np.array([10.0, -4.0, np.radians(170.0)])
+
+    def off(dx: float, dy: float, dyaw: float) -> np.ndarray:
+        return p0 + np.array([dx, dy, dyaw])
+
+    g = Guess(np.eye(4), 1.0, 5.0)
+    assert not reach_of(off(2.0, 2.0, 0.0), p0, g)[2]  # 2.83 m
+    assert reach_of(off(2.2, 2.2, 0.0), p0, g)[2]  # 3.11 m
+    metres, degrees, far = reach_of(off(0.0, 0.0, np.radians(16.0)), p0, g)
+    assert far and metres == 0.0 and degrees == pytest.approx(16.0)
+    assert not reach_of(off(0.0, 0.0, np.radians(14.0)), p0, g)[2]  # across +-180 deg
+    assert not reach_of(off(1.0, 0.0, np.pi), p0, Guess(np.eye(4), 1.0, 180.0))[2]
+    poses = np.array([off(5.0, 0.0, 0.0), off(0.5, 0.0, 0.0), off(0.0, 0.0, 0.5)])
+    ranked = Ranked(poses, np.array([3.0, 2.0, 1.0]), np.array([1.0, 0.9, 0.8]), np.ones(3, bool))
+    kept = within(ranked, p0, g)
+    np.testing.assert_array_equal(kept.poses, poses[[1]])  # 5 m and 28.6 deg are beyond
+    assert kept.evidence.tolist() == [0.9]
+    alone = Ranked(poses[:1], ranked.scores[:1], ranked.evidence[:1], ranked.converged[:1])
+    assert within(alone, p0, g) is alone  # none inside: all kept (the verdict says why)
+    text = beyond_text(poses[0], p0, g)
+    assert "5.00 m and 0.0 deg from the guess, beyond 3 times its uncertainty (1 m, 5 deg)" in text
+    assert beyond_text(poses[1], p0, g) == ""

@@ -174,18 +174,22 @@ def verdict_of(
     q: QualityConfig,
     sights: Sights = Sights(),
     rivals: Sequence[Rival] = (),
+    beyond: str = "",
 ) -> Verdict:
     """The verdict on a registration, in the order of precedence of the module docstring. A
     pose is *refuted*, not merely doubted, when it puts more than ``quality.max_free_space`` of
     the points into space a scanner saw empty (:func:`in_bin_refutes`), or more than
     ``quality.max_free_space_around`` in front of all it saw around them, or when ICP moved it
     further than it may: the data contradict it, so no agreement with other links can confirm
-    it (two links slid by the same period of a street's facades agree with each other)."""
+    it (two links slid by the same period of a street's facades agree with each other).
+    ``beyond``: why the pose is not one its initial guess allows ('' when it is, or without one).
+    """
     blind = not np.isfinite(sights.final)
     warnings, weak = ndt_warnings(fit, q, refined.icp is not None, blind)
     more, weak_icp = icp_warnings(refined, level, q)
     warnings += more
     warnings += [f"ambiguous: {r.text}" for r in rivals]
+    warnings += [beyond] if beyond else []
     notes: list[str] = []
     contradicts = in_bin_refutes(sights, q)
     if contradicts:

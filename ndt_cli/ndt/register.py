@@ -4,8 +4,9 @@
    branch-and-bound search over (x, y, yaw) (:mod:`ndt_cli.ndt.bnb`), whose best distinct poses
    are the candidates; when its second pose scores nearly as well as its best, the grid of
    Newton starts at the coarsest cell runs too and its candidates join (``search.method:
-   starts``: the grid alone). With a guess, the guess is the only candidate and every cell size
-   is a refinement level.
+   starts``: the grid alone). With a guess (:mod:`ndt_cli.ndt.guess`), its headings refined
+   from a cell of twice its uncertainty and, when it is uncertain by more than a metre, the
+   best poses of a local search within that uncertainty.
 2. **Coarse to fine** (:mod:`ndt_cli.ndt.coarse_to_fine`): every candidate refined through the
    finer cell sizes (from ``search.bnb_start_cell`` after the global search), with restarts
    from +-1/2 and +-1 cell offsets at the first of them (after the global search) or at each.
@@ -27,7 +28,7 @@ Every stage receives its own config section. The compiled kernels are injectable
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -40,6 +41,7 @@ from ndt_cli.core.transforms import pose2d_matrix, yaw_of
 from ndt_cli.ndt.backend import NUMBA, Kernels
 from ndt_cli.ndt.coarse_to_fine import Ranked, Refined, coarse_to_fine, rank, with_verification
 from ndt_cli.ndt.grid import NDTMap
+from ndt_cli.ndt.guess import Guess, beyond_text, guess_starts, within
 from ndt_cli.ndt.kernels import SourcePoints
 from ndt_cli.ndt.levels import SourceSampler, TargetMaps, gate_inputs
 from ndt_cli.ndt.precompile import search_kernels_ahead
@@ -80,48 +82,14 @@ def _starts(
     ``guess`` is one more candidate beside the search's: it wins only if it fits better, so a
     wrong guess cannot be accepted where the search alone would not accept it."""
     if init is not None:
-        return _from_guess(target, source, init, cfg)
+        p0 = _planar(target, source, np.asarray(init.T_target_source, float))
+        starts, levels, schedule = guess_starts(p0, init, cfg, maps, sampler, kernels)
+        return _Start(starts, levels, schedule, (cfg.search.refine_offsets,) * len(schedule))
     start = _search(target, source, maps, sampler, cfg, kernels)
     if guess is not None:
         extra = _planar(target, source, np.asarray(guess, float))
         start = replace(start, candidates=np.vstack([start.candidates, extra]))
     return start
-
-
-@dataclass(frozen=True)
-class Guess:
-    """An initial guess of ``T_target_source`` (4x4, the scans' own frames) and how far it may
-    be from the truth: ``sigma_m`` (m) and ``sigma_deg`` (degrees); a GNSS position or a
-    placement by hand is within about 1 m and 5 degrees."""
-
-    T_target_source: np.ndarray
-    sigma_m: float = 1.0
-    sigma_deg: float = 5.0
-
-
-ALL_ROUND_DEG = 45.0  # a guess this uncertain in heading is searched all round
-
-
-def first_cell(cells: Sequence[float], sigma_m: float) -> float:
-    """The cell size (m) a guess within ``sigma_m`` starts at: the smallest configured cell of
-    at least twice its uncertainty (restarts at +-1 cell then cover it), the coarsest when none
-    is that large. Coarser levels would let a good guess slide away: on a busy street the
-    truth itself, refined from 20 m cells, ended 16.6 m along the street."""
-    wide = [c for c in cells if c >= 2.0 * sigma_m]
-    return min(wide) if wide else max(cells)
-
-
-def _from_guess(target: PreparedScan, source: PreparedScan, init: Guess, cfg: Config) -> _Start:
-    """Candidates around the guess (its heading and +-``sigma_deg``), refined from
-    :func:`first_cell` down, restarting from the offsets at every level."""
-    cells = cfg.grid.cell_sizes
-    p0 = _planar(target, source, np.asarray(init.T_target_source, float))
-    turns = [0.0] if init.sigma_deg < 2.0 else [0.0, -init.sigma_deg, init.sigma_deg]
-    if init.sigma_deg >= ALL_ROUND_DEG:  # a position without a heading: every 15 degrees
-        turns = list(np.arange(-180.0, 180.0, 15.0))
-    candidates = p0[None, :] + np.radians(np.array(turns))[:, None] * np.array([0.0, 0.0, 1.0])
-    schedule = tuple(c for c in cells if c <= first_cell(cells, init.sigma_m))
-    return _Start(candidates, [], schedule, (cfg.search.refine_offsets,) * len(schedule))
 
 
 def _search(
@@ -312,11 +280,13 @@ def register_prepared(
     deeper: bool = True,
 ) -> RegistrationResult:
     """Register prepared scans. ``init``: a :class:`Guess` (or a 4x4 T_target_source, within
-    1 m and 5 degrees) to start from instead of the search; ``guess``: a 4x4 T_target_source
-    added to the search's candidates (a loop closure's pose from the network), never trusted
-    more than the search; ``deeper``: refine the search's next distinct poses when the free
-    space doubts the first ones (:func:`_deeper`); a campaign's probes of pairs that may not
-    overlap at all leave it to the pairs of its plan (the result says it was skipped)."""
+    1 m and 5 degrees) to start from instead of the search (the poses it allows are judged, a
+    final pose beyond its reach is suspect: :mod:`ndt_cli.ndt.guess`); ``guess``: a 4x4
+    T_target_source added to the search's candidates (a loop closure's pose from the network),
+    never trusted more than the search; ``deeper``: refine the search's next distinct poses
+    when the free space doubts the first ones (:func:`_deeper`); a campaign's probes of pairs
+    that may not overlap at all leave it to the pairs of its plan (the result says it was
+    skipped)."""
     if init is not None and not isinstance(init, Guess):
         init = Guess(np.asarray(init, float))
     t_start = time.perf_counter()
@@ -329,12 +299,18 @@ def register_prepared(
     def run(candidates: np.ndarray) -> Refined:
         return coarse_to_fine(candidates, schedule, maps, sampler, cfg.optimizer, restarts, kernels)
 
+    p0 = None if init is None else _planar(target, source, init.T_target_source)
+
+    def ranked_of(refined: Refined) -> Ranked:
+        ranked = rank(refined, schedule[-1])
+        return ranked if p0 is None else within(ranked, p0, init)
+
     refined = run(start.candidates)
-    judged = _judged(rank(refined, schedule[-1]), target, source, cfg)
+    judged = _judged(ranked_of(refined), target, source, cfg)
     depth = Deeper.SKIPPED if _doubtful(judged, start) else Deeper.NONE
     if depth is Deeper.SKIPPED and deeper:
         refined = _deeper(target, source, start, refined, run, cfg, kernels)
-        judged = _judged(rank(refined, schedule[-1]), target, source, cfg)
+        judged = _judged(ranked_of(refined), target, source, cfg)
         depth = Deeper.DONE
     ranked = judged.ranked
     gate_map, gate_points = gate_inputs(
@@ -351,7 +327,10 @@ def register_prepared(
     second = float(judged.shares[1]) if len(judged.shares) > 1 else float("nan")
     final, around = _final_free_space(target, source, refinement.T, cfg)
     sights = Sights(final, second, judged.note, around, judged.kept_evidence)
-    verdict = verdict_of(fit, converged, refinement, target.level, cfg.quality, sights, rivals)
+    beyond = "" if p0 is None else beyond_text(_planar(target, source, refinement.T), p0, init)
+    verdict = verdict_of(
+        fit, converged, refinement, target.level, cfg.quality, sights, rivals, beyond
+    )
     per_slice = tuple(int(n) for n in sampler.fine.per_slice(len(source.slices)))
     stages = _Stages(
         (*start.levels, *refined.levels),

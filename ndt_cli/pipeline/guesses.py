@@ -111,11 +111,16 @@ def relative(
     poses: Mapping[int, np.ndarray], target: int, source: int, sigma: tuple[float, float]
 ) -> Guess | None:
     """The guess of ``T_target_source`` two approximate poses give (None unless both have
-    one); each within ``sigma`` (m, degrees), so the pair within sqrt(2) times it."""
+    one), each within ``sigma`` (m, degrees). The pair's heading is within sqrt(2) times the
+    degrees; its position within sqrt(2) times the metres and what the target's heading error
+    does to the source's position seen from it: ``d`` m away, ``d`` times that error (5 degrees
+    over 90 m: 7.9 m)."""
     if target not in poses or source not in poses:
         return None
     T = np.linalg.inv(poses[target]) @ poses[source]
-    return Guess(T, sigma[0] * np.sqrt(2.0), min(180.0, sigma[1] * np.sqrt(2.0)))
+    d = float(np.hypot(*T[:2, 3]))
+    metres = float(np.hypot(sigma[0] * np.sqrt(2.0), d * np.radians(sigma[1])))
+    return Guess(T, metres, min(180.0, sigma[1] * np.sqrt(2.0)))
 
 
 def better(search: RegistrationResult, guessed: RegistrationResult) -> RegistrationResult:
