@@ -144,3 +144,46 @@ def test_height_offset_of_two_scans_of_one_street_is_their_true_height_differenc
     tz = height_offset(ta, tb, np.array([*t_xy, yaw]))
     assert tz == pytest.approx(b_centre[2] - a_centre[2], abs=0.03)
     assert height_offset(Terrain.flat(), tb, np.zeros(3)) is None  # no measured ground
+
+
+def _forest_patches(rng, slope_deg: float, tilt: np.ndarray) -> tuple[Patches, np.ndarray]:
+    """Local planes of a forest plot as a scanner tilted by the rotation vector ``tilt`` sees
+    them: 150 trunks (30 % leaning 1-6 degrees any way; bark rough by 1.2 degrees), 40 patches
+    each, and ground patches sloping by ``slope_deg``; and the true vertical in the scanner's
+    frame."""
+    normals = []
+    for k in range(150):
+        lean = np.radians(rng.uniform(1.0, 6.0)) if k % 10 < 3 else 0.0
+        axis = rotation_from_vector(np.array([lean, 0.0, 0.0])) @ [0.0, 0.0, 1.0]
+        axis = rotation_from_vector(np.array([0.0, 0.0, rng.uniform(0, 2 * np.pi)])) @ axis
+        e1 = np.cross(axis, [1.0, 0.0, 0.0])
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(axis, e1)
+        t = rng.uniform(0, 2 * np.pi, 40)
+        normals.append(np.cos(t)[:, None] * e1 + np.sin(t)[:, None] * e2)
+    up = rotation_from_vector(np.radians([slope_deg, 0.0, 0.0])) @ [0.0, 0.0, 1.0]
+    normals.append(np.tile(up, (3000, 1)))
+    n = np.vstack(normals) + rng.normal(0, np.radians(1.2), (sum(map(len, normals)), 3))
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    R = rotation_from_vector(tilt)
+    n = n @ R  # the scanner's frame
+    n *= np.where(n[:, 2] < 0, -1.0, 1.0)[:, None]
+    return Patches(n, np.full(len(n), 0.95)), R.T @ [0.0, 0.0, 1.0]
+
+
+def test_a_forest_slope_under_an_upright_scanner_does_not_tilt_its_vertical():
+    """Leaning trunks make the structures unclean (their patches lean by more than 1 degree),
+    so the ground's normal would be taken; on an 8.5 % slope (4.9 degrees) under a scanner
+    within a degree of upright, the structures' vertical is kept. A level plot, or a scanner
+    tilted 10 degrees (far from both), keeps the ground's, as before."""
+    rng = np.random.default_rng(7)
+    patches, truth = _forest_patches(rng, 4.86, np.radians([0.6, -0.5, 0.0]))
+    assert vertical_of(patches, "structures").lean > 1.0  # the premise: unclean
+    v = vertical_of(patches)
+    assert v.source is VerticalSource.STRUCTURES and _angle(v.up, truth) < 0.3
+    assert _angle(vertical_of(patches, "ground").up, truth) > 4.5
+    level, truth = _forest_patches(rng, 0.0, np.radians([0.6, -0.5, 0.0]))
+    assert vertical_of(level).source is VerticalSource.GROUND
+    assert _angle(vertical_of(level).up, truth) < 0.1
+    tilted, truth = _forest_patches(rng, 4.86, np.radians([10.0, 0.0, 0.0]))
+    assert vertical_of(tilted).source is VerticalSource.GROUND
