@@ -3,6 +3,8 @@ which result of a link registered from the search and from its guess is kept."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 import pytest
 
@@ -18,6 +20,7 @@ from ndt_cli.pipeline.guesses import (
     pose_of,
     read_init_poses,
     relative,
+    turned_round,
 )
 from ndt_cli.pipeline.network import LinkKind, read_pairs
 
@@ -109,22 +112,70 @@ def test_two_approximate_poses_guess_their_pair_with_the_spread_of_their_errors(
     assert relative(W, 0, 2, (1.0, 5.0)) is None
 
 
+@dataclass(frozen=True)
 class _R:
     """The fields :func:`better` reads of a registration result."""
 
-    def __init__(self, ok: bool, score: float) -> None:
-        self.ok, self.score = ok, score
-        self.status = Status.OK if ok else Status.SUSPECT
+    status: Status
+    score: float
+    scene: str = "street"
+    T_target_source: np.ndarray = field(default_factory=lambda: np.eye(4))
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def ok(self) -> bool:
+        return self.status is Status.OK
+
+
+def _r(ok: bool, score: float, scene: str = "street", x: float = 0.0) -> _R:
+    return _R(Status.OK if ok else Status.SUSPECT, score, scene, pose2d_matrix(x, 0.0, 0.0))
 
 
 def test_the_result_kept_is_the_ok_one_then_the_higher_score():
-    search, guessed = _R(True, 380.0), _R(True, 421.0)
+    search, guessed = _r(True, 380.0), _r(True, 421.0)
     assert better(search, guessed) is guessed  # the search missed a pose that scores higher
     assert better(guessed, search) is guessed
-    assert better(_R(True, 300.0), _R(False, 900.0)).score == 300.0  # a doubted guess: never
-    assert better(_R(False, 300.0), _R(True, 100.0)).score == 100.0
-    tie = _R(True, 400.0)
-    assert better(tie, _R(True, 400.0)) is tie
+    assert better(_r(True, 300.0), _r(False, 900.0)).score == 300.0  # a doubted guess: never
+    assert better(_r(False, 300.0), _r(True, 100.0, x=3.9)).score == 100.0  # rescued
+    tie = _r(True, 400.0)
+    assert better(tie, _r(True, 400.0)) is tie
+
+
+def test_indoors_a_guess_rescues_only_the_pose_the_search_ended_at():
+    """Indoors the guess's pose 3.9 m from where the search ended is kept, but suspect, with
+    the distance; the search's own pose, doubted by it (a rival the guess rules out), is ok."""
+    kept = better(_r(False, 50.0, "indoor"), _r(True, 100.0, "indoor", x=3.9))
+    assert kept.status is Status.SUSPECT and kept.score == 100.0
+    assert "not confirmed: the search ended 3.90 m and 0.0 deg from it" in kept.warnings[-1]
+    assert better(_r(False, 300.0, "indoor"), _r(True, 100.0, "indoor", x=3.9)).score == 300.0
+    same = _r(True, 100.0, "indoor", x=0.3)
+    assert better(_r(False, 300.0, "indoor"), same) is same
+    assert better(_r(True, 80.0, "indoor"), _r(True, 100.0, "indoor", x=3.9)).score == 80.0
+
+
+def test_a_link_registered_the_other_way_round_keeps_its_guess_turned_round():
+    """A suspect found link registered again the other way round (the link runner's second
+    try) is judged against the same guess: T_source_target, the same uncertainty."""
+    guess = Guess(pose2d_matrix(10.0, 2.0, 0.3), 3.3, 7.1)
+    back = turned_round(guess)
+    np.testing.assert_allclose(back.T_target_source @ guess.T_target_source, np.eye(4), atol=1e-12)
+    assert (back.sigma_m, back.sigma_deg) == (3.3, 7.1)
+    assert turned_round(None) is None
+
+
+def test_a_search_that_ends_beyond_the_guess_is_suspect():
+    """A search ending 180 degrees (or 6 m) from a guess within 1.4 m and 7 degrees
+    contradicts it; within its reach it is kept as it is."""
+    guess = Guess(pose2d_matrix(10.0, 2.0, 0.3), np.sqrt(2), 5 * np.sqrt(2))
+    turned = _R(Status.OK, 500.0, T_target_source=pose2d_matrix(10.0, 2.0, 0.3 + np.pi))
+    kept = better(turned, _r(False, 100.0), guess)
+    assert kept.status is Status.SUSPECT and kept.score == 500.0
+    assert "0.00 m and 180.0 deg from the guess, beyond 3 times" in kept.warnings[-1]
+    slid = _R(Status.OK, 500.0, T_target_source=pose2d_matrix(16.0, 2.0, 0.3))
+    assert "6.00 m and 0.0 deg" in better(slid, _r(False, 100.0), guess).warnings[-1]
+    near = _R(Status.OK, 500.0, T_target_source=pose2d_matrix(11.0, 2.5, 0.35))
+    assert better(near, _r(False, 100.0), guess) is near
+    assert better(turned, _r(False, 100.0)) is turned  # no guess: nothing to contradict
 
 
 def test_a_guess_allows_the_poses_within_three_times_its_uncertainty():

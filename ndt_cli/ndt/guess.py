@@ -53,14 +53,15 @@ def guess_starts(
 ) -> tuple[np.ndarray, list[LevelStats], tuple[float, ...]]:
     """Candidates around the guess ``p0`` (tx, ty m, yaw rad between the scans' reduced,
     levelled frames), the levels run to find them and the schedule they are refined through.
-    Its heading and +-``sigma_deg`` are refined from :func:`first_cell` down to the first
-    verification cell (2 m). A guess less certain than that cell's reach (``sigma_m`` above
-    1 m) is also searched locally (:func:`_local_starts`). From 2 m on, all these poses are
-    refined together and judged: a coarse cell lets a guess slide along a uniform scene (a busy
-    street, a guess 2 m and 2 degrees off: 3.3 m along it from 5 m cells, at the truth from
-    2 m; an office floor, 1.6 m off: 3.9 m from 2 m cells), and every pose within the guess's
-    uncertainty that fits is a candidate, a pose slid along the scene that fits about as well a
-    rival, as it is to the global search."""
+    Its heading and +-``sigma_deg`` are refined from :func:`first_cell` down. Where that cell
+    is coarser than the first verification cell (2 m; ``sigma_m`` above 1 m on a street's
+    cells), the guess is also searched locally at 2 m cells (:func:`_local_starts`), and from
+    2 m on all these poses are refined together and judged: a coarse cell lets a guess slide
+    along a uniform scene (a busy street, a guess 2 m and 2 degrees off: 3.3 m along it from
+    5 m cells, at the truth from 2 m), and every pose within the guess's uncertainty that fits
+    is a candidate, a pose slid along the scene that fits about as well a rival, as it is to the
+    global search. (Indoors, whose cells start at 2 m, the local search made 2 more scans of the
+    sweep's office floors ok and 1 of them wrong: it is not run there.)"""
     cells, flags = cfg.grid.cell_sizes, cfg.search.refine_offsets
     turns = [0.0] if init.sigma_deg < 2.0 else [0.0, -init.sigma_deg, init.sigma_deg]
     if init.sigma_deg >= ALL_ROUND_DEG:  # a position without a heading: every 15 degrees
@@ -69,14 +70,10 @@ def guess_starts(
     first, verify = first_cell(cells, init.sigma_m), VERIFY_CELLS[0]
     coarse = tuple(c for c in cells if verify < c <= first)
     levels: list[LevelStats] = []
-    found = [starts]
     if coarse:
         slid = coarse_to_fine(starts, coarse, maps, sampler, cfg.optimizer, flags, kernels)
-        found, levels = [slid.candidates, starts], list(slid.levels)
-    if init.sigma_m > verify / 2.0:
         local, level = _local_starts(starts, init.sigma_m, maps, sampler, cfg, kernels)
-        found, levels = [*found, local], [*levels, level]
-    starts = np.vstack(found)
+        starts, levels = np.vstack([slid.candidates, starts, local]), [*slid.levels, level]
     schedule = tuple(c for c in cells if c <= min(first, verify)) or VERIFY_CELLS
     return starts, levels, schedule
 

@@ -13,6 +13,7 @@ pose are also placed near it: the scans around it are registered to it first.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -20,8 +21,8 @@ import numpy as np
 from ndt_cli.core.transforms import pose2d_matrix
 from ndt_cli.errors import ConfigError, InputError
 from ndt_cli.io.matrices import named_rows, read_matrix, rigid_problem
-from ndt_cli.ndt.register import Guess
-from ndt_cli.ndt.result import RegistrationResult
+from ndt_cli.ndt.guess import Guess, beyond_text
+from ndt_cli.ndt.result import RegistrationResult, Status
 
 MAX_COORDINATE_M = 1e8  # m: a projected coordinate is at most tens of millions of metres
 MAX_PAIR_M = 10_000.0  # m: scans farther apart share nothing
@@ -123,12 +124,72 @@ def relative(
     return Guess(T, metres, min(180.0, sigma[1] * np.sqrt(2.0)))
 
 
-def better(search: RegistrationResult, guessed: RegistrationResult) -> RegistrationResult:
+def turned_round(guess: Guess | None) -> Guess | None:
+    """The guess of the same link registered the other way round (``T_source_target``)."""
+    if guess is None:
+        return None
+    return Guess(np.linalg.inv(guess.T_target_source), guess.sigma_m, guess.sigma_deg)
+
+
+def better(
+    search: RegistrationResult, guessed: RegistrationResult, guess: Guess | None = None
+) -> RegistrationResult:
     """The result kept of a link registered from the search and from a guess: the one the
-    gate calls ok, then the higher NDT score at the finest cells (the search's on a tie)."""
+    gate calls ok, then the higher NDT score at the finest cells (the search's on a tie). The
+    two judge each other first: the search's pose beyond the ``guess``'s reach is suspect
+    (:func:`against_guess`), and indoors a guess's pose that the search did not end at is not
+    ok on its own (:func:`unconfirmed_indoors`)."""
+    guessed = unconfirmed_indoors(search, guessed)
+    search = against_guess(search, guess)
     if search.ok != guessed.ok:
         return search if search.ok else guessed
     return guessed if guessed.score > search.score else search
+
+
+def against_guess(result: RegistrationResult, guess: Guess | None) -> RegistrationResult:
+    """``result``, suspect when it is ok and its pose is beyond the guess's reach (3 times its
+    uncertainty: :func:`~ndt_cli.ndt.guess.beyond_text`). A search that ends 180 degrees from
+    a guess within 7 degrees contradicts it: with approximate poses the sweep's office floors
+    had three scans ok and turned by 180 degrees through such a link, kept where the guess's
+    own result was not confirmed. A guess that lies about its uncertainty makes right links
+    suspect too: the warning says how far the data put them from it."""
+    if guess is None or not result.ok:
+        return result
+    text = beyond_text(_planar(result.T_target_source), _planar(guess.T_target_source), guess)
+    if not text:
+        return result
+    return replace(result, status=Status.SUSPECT, warnings=(*result.warnings, text))
+
+
+def _planar(T: np.ndarray) -> np.ndarray:
+    """(x, y m, yaw rad) of a 4x4 T_target_source."""
+    return np.array([T[0, 3], T[1, 3], np.arctan2(T[1, 0], T[0, 0])])
+
+
+def unconfirmed_indoors(
+    search: RegistrationResult, guessed: RegistrationResult
+) -> RegistrationResult:
+    """``guessed``, suspect when it was registered indoors, is ok, and is not the pose the
+    search ended at (more than 0.5 m or 3 degrees from it). Indoors one registration's evidence
+    cannot tell the truth from a pose slid by a room or across a wall (docs/trust.md), and the
+    guess's refinement sees only the poses near it; the search's candidates and the free space
+    judged the whole floor. With approximate poses within 1 m and 5 degrees, the sweep's office
+    floors had two scans ok and wrong through such links: one 3.9 m along the floor, one
+    15 cm across a wall."""
+    if guessed.scene != "indoor" or not guessed.ok or same_pose(search, guessed):
+        return guessed
+    d = np.linalg.inv(search.T_target_source) @ guessed.T_target_source
+    text = (
+        f"indoors the guess's pose is not confirmed: the search ended {np.hypot(*d[:2, 3]):.2f} m "
+        f"and {abs(np.degrees(np.arctan2(d[1, 0], d[0, 0]))):.1f} deg from it"
+    )
+    return replace(guessed, status=Status.SUSPECT, warnings=(*guessed.warnings, text))
+
+
+def same_pose(a: RegistrationResult, b: RegistrationResult) -> bool:
+    """Two results end at one pose: within 0.5 m and 3 degrees of each other."""
+    d = np.linalg.inv(a.T_target_source) @ b.T_target_source
+    return bool(np.hypot(*d[:2, 3]) <= 0.5 and abs(np.degrees(np.arctan2(d[1, 0], d[0, 0]))) <= 3.0)
 
 
 def guess_text(guess: Guess | None) -> str:

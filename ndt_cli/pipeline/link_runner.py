@@ -22,7 +22,7 @@ from ndt_cli.core.arrays import array_bytes
 from ndt_cli.ndt.prepare import PreparedScan
 from ndt_cli.ndt.result import Deeper, Status
 from ndt_cli.pipeline.executors import Executor
-from ndt_cli.pipeline.guesses import guess_text
+from ndt_cli.pipeline.guesses import guess_text, turned_round
 from ndt_cli.pipeline.links import Link, LinkStore, link_key, skipped_key
 from ndt_cli.pipeline.network import LinkKind, Pair, PlannedLink
 from ndt_cli.pipeline.scans import scan_names
@@ -96,7 +96,7 @@ class LinkRunner:
         ``classic`` chain), a found link that comes out suspect or degenerate is registered
         the other way round too, and the better of the two kept (the registration is not
         symmetric: a link at the margin of the quality gate may pass one way), so that which
-        scan is the target never decides a link of the network."""
+        scan is the target never decides a link of the network; with its guess turned round."""
         fresh = [k for k in planned if k.pair not in self.links]
         self.register_jobs([self._job(k) for k in fresh])
         if classic or not both_ways:
@@ -105,7 +105,10 @@ class LinkRunner:
         again = [k for k in planned if k.kind is LinkKind.FOUND and k.pair in self.links]
         again = [k for k in again if self.links[k.pair].status in marginal]
         self.register_jobs(
-            [self._job(PlannedLink(k.source, k.target, k.kind, deep=k.deep)) for k in again]
+            [
+                self._job(PlannedLink(k.source, k.target, k.kind, turned_round(k.guess), k.deep))
+                for k in again
+            ]
         )
 
     def register_anew(self, planned: Sequence[PlannedLink]) -> None:

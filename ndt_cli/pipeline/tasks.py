@@ -124,7 +124,8 @@ def register_link(job: LinkJob, target: PreparedScan, source: PreparedScan, cfg:
         searched = register_prepared(target, source, cfg, deeper=job.deep)
         result = searched
         if job.guess is not None:
-            result = better(searched, register_prepared(target, source, cfg, init=job.guess))
+            guessed = register_prepared(target, source, cfg, init=job.guess)
+            result = better(searched, guessed, job.guess)
         if searched.deeper is Deeper.SKIPPED:
             result = replace(result, deeper=Deeper.SKIPPED)
     except NdtError as exc:
