@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -86,12 +86,16 @@ def quick_streets() -> list[StreetWorld]:
 
 @dataclass(frozen=True)
 class Case:
-    """A campaign to run: its scans (files), true poses, which scans should come out ok."""
+    """A campaign to run: its scans (files), true poses, which scans should come out ok,
+    approximate poses of its scans (``--init-poses``; none: the search alone), and whether it is
+    hostile though every scan should be ok (its guesses lie about their uncertainty)."""
 
     name: str
     files: list[Path]
     truth: list[np.ndarray]
     expected: list[bool]
+    guesses: dict[int, np.ndarray] = field(default_factory=dict)
+    hostile: bool = False
 
 
 Simulate = Callable[[object], tuple[object, list[np.ndarray], list[np.ndarray]]]

@@ -2,11 +2,12 @@
 tuned on, against ground truth, run by hand or by ``make trust``:
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/trust_sweep.py [--quick]
-        [--world streets|interiors|forests|districts|shuffled] [--only TEXT]
+        [--world streets|interiors|forests|districts|shuffled|guessed] [--only TEXT]
 
-Five worlds: streets (varied clean streets, hostile cases and the real MULLS sequence:
+Six worlds: streets (varied clean streets, hostile cases and the real MULLS sequence:
 ``benchmarks/trust_cases.py``), building interiors, forests, city districts and long routes
-given in shuffled order (``benchmarks/trust_worlds.py``). Printed per case, and totalled per
+given in shuffled order (``benchmarks/trust_worlds.py``), and scans of them with approximate
+poses (``--init-poses``: ``benchmarks/trust_guessed.py``). Printed per case, and totalled per
 world (clean and hostile cases apart): scans ok, false alarms (a scan that should be ok and is
 not; a correct link not ok), wrong ok (an ok scan or link that is not correct: within 0.1 deg
 / 5 cm,
@@ -33,6 +34,7 @@ sys.path.insert(0, str(ROOT))
 import numpy as np  # noqa: E402
 
 from benchmarks.trust_cases import CACHE, Case, cross_scene_pairs, street_cases  # noqa: E402
+from benchmarks.trust_guessed import guessed_cases  # noqa: E402
 from benchmarks.trust_worlds import (  # noqa: E402
     district_cases,
     forest_cases,
@@ -43,6 +45,7 @@ from ndt_cli.analysis import trust  # noqa: E402
 from ndt_cli.config import Config  # noqa: E402
 from ndt_cli.ndt.result import Status  # noqa: E402
 from ndt_cli.pipeline.chain import run_chain  # noqa: E402
+from ndt_cli.pipeline.options import NetworkOptions  # noqa: E402
 from ndt_cli.pipeline.verify import NodeStatus  # noqa: E402
 
 WORLDS: dict[str, Callable[[bool], list[Case]]] = {
@@ -51,6 +54,7 @@ WORLDS: dict[str, Callable[[bool], list[Case]]] = {
     "forests": forest_cases,
     "districts": district_cases,
     "shuffled": route_cases,
+    "guessed": guessed_cases,
 }
 
 
@@ -58,7 +62,8 @@ def run_case(case: Case, cfg: Config, jobs: int) -> tuple[trust.TrustCounts, dic
     """Chain the case's scans and judge the verdicts against the truth."""
     with tempfile.TemporaryDirectory() as out:
         t0 = time.perf_counter()
-        result = run_chain(case.files, cfg, out, jobs=jobs)
+        network = NetworkOptions(init_poses=case.guesses) if case.guesses else None
+        result = run_chain(case.files, cfg, out, jobs=jobs, network=network)
         elapsed = time.perf_counter() - t0
     links = trust.link_truths(result, case.truth)
     scans = trust.scan_truths(result, case.truth)
@@ -182,7 +187,8 @@ def _run_world(name: str, args: argparse.Namespace, cfg: Config, rows: list[dict
             continue
         counts, detail = run_case(case, cfg, args.jobs)
         rows += detail["rows"]
-        kind = "clean" if all(case.expected) and "real" not in case.name else "hostile"
+        clean = all(case.expected) and "real" not in case.name and not case.hostile
+        kind = "clean" if clean else "hostile"
         total[kind] = total.get(kind, trust.TrustCounts()) + counts
         print(_row(case.name, counts, detail), flush=True)
         if args.verbose:
