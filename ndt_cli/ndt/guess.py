@@ -1,8 +1,8 @@
 """Where a registration with an initial guess starts (:class:`Guess`: a pose and how far it
 may be off): the guess's headings refined from a cell as coarse as twice its uncertainty, and,
-when it is less certain than the finest cells reach, a local search around it; the coarse to
-fine refinement and the judge (:mod:`ndt_cli.ndt.rivals`) then treat every pose found within
-the guess's uncertainty as they treat the global search's candidates."""
+when that cell is coarser than 2 m, a local search around it; the coarse to fine refinement
+and the judge (:mod:`ndt_cli.ndt.rivals`) then treat every pose found within the guess's
+reach (:func:`within`) as they treat the global search's candidates."""
 
 from __future__ import annotations
 
