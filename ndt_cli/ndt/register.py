@@ -28,7 +28,7 @@ Every stage receives its own config section. The compiled kernels are injectable
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -66,6 +66,7 @@ class _Start:
     schedule: tuple[float, ...]
     restarts: tuple[bool, ...]
     searched: int = 0
+    guessed: np.ndarray | None = None  # the initial guess's planar pose (None: no guess)
 
 
 def _starts(
@@ -78,13 +79,15 @@ def _starts(
     guess: np.ndarray | None,
     kernels: Kernels,
 ) -> _Start:
-    """Where the refinement starts. ``init`` replaces the search (:func:`_from_guess`).
+    """Where the refinement starts. ``init`` replaces the search
+    (:func:`~ndt_cli.ndt.guess.guess_starts`).
     ``guess`` is one more candidate beside the search's: it wins only if it fits better, so a
     wrong guess cannot be accepted where the search alone would not accept it."""
     if init is not None:
         p0 = _planar(target, source, np.asarray(init.T_target_source, float))
         starts, levels, schedule = guess_starts(p0, init, cfg, maps, sampler, kernels)
-        return _Start(starts, levels, schedule, (cfg.search.refine_offsets,) * len(schedule))
+        flags = (cfg.search.refine_offsets,) * len(schedule)
+        return _Start(starts, levels, schedule, flags, guessed=p0)
     start = _search(target, source, maps, sampler, cfg, kernels)
     if guess is not None:
         extra = _planar(target, source, np.asarray(guess, float))
@@ -202,6 +205,15 @@ def _deeper(
     return replace(refined.joined(second), levels=(*refined.levels, found.level, *second.levels))
 
 
+def _allowed(
+    refined: Refined, schedule: Sequence[float], start: _Start, init: Guess | None
+) -> Ranked:
+    """The refined candidates by evidence, those beyond the initial guess's reach dropped
+    (:func:`~ndt_cli.ndt.guess.within`)."""
+    ranked = rank(refined, schedule[-1])
+    return ranked if start.guessed is None else within(ranked, start.guessed, init)
+
+
 def _judged(ranked: Ranked, target: PreparedScan, source: PreparedScan, cfg: Config) -> Judged:
     """The candidates judged by what the scanners saw (:mod:`ndt_cli.ndt.rivals`): the
     :data:`MAX_JUDGED` of most evidence measured, NaN for the rest and for scans that cannot
@@ -299,18 +311,12 @@ def register_prepared(
     def run(candidates: np.ndarray) -> Refined:
         return coarse_to_fine(candidates, schedule, maps, sampler, cfg.optimizer, restarts, kernels)
 
-    p0 = None if init is None else _planar(target, source, init.T_target_source)
-
-    def ranked_of(refined: Refined) -> Ranked:
-        ranked = rank(refined, schedule[-1])
-        return ranked if p0 is None else within(ranked, p0, init)
-
     refined = run(start.candidates)
-    judged = _judged(ranked_of(refined), target, source, cfg)
+    judged = _judged(_allowed(refined, schedule, start, init), target, source, cfg)
     depth = Deeper.SKIPPED if _doubtful(judged, start) else Deeper.NONE
     if depth is Deeper.SKIPPED and deeper:
         refined = _deeper(target, source, start, refined, run, cfg, kernels)
-        judged = _judged(ranked_of(refined), target, source, cfg)
+        judged = _judged(_allowed(refined, schedule, start, init), target, source, cfg)
         depth = Deeper.DONE
     ranked = judged.ranked
     gate_map, gate_points = gate_inputs(
@@ -327,6 +333,7 @@ def register_prepared(
     second = float(judged.shares[1]) if len(judged.shares) > 1 else float("nan")
     final, around = _final_free_space(target, source, refinement.T, cfg)
     sights = Sights(final, second, judged.note, around, judged.kept_evidence)
+    p0 = start.guessed
     beyond = "" if p0 is None else beyond_text(_planar(target, source, refinement.T), p0, init)
     verdict = verdict_of(
         fit, converged, refinement, target.level, cfg.quality, sights, rivals, beyond

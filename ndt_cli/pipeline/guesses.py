@@ -18,11 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ndt_cli.core.transforms import pose2d_matrix
+from ndt_cli.core.transforms import pose2d_matrix, wrap_angle, yaw_of
 from ndt_cli.errors import ConfigError, InputError
 from ndt_cli.io.matrices import named_rows, read_matrix, rigid_problem
 from ndt_cli.ndt.guess import Guess, beyond_text
 from ndt_cli.ndt.result import RegistrationResult, Status
+from ndt_cli.ndt.rivals import distinct
 
 MAX_COORDINATE_M = 1e8  # m: a projected coordinate is at most tens of millions of metres
 MAX_PAIR_M = 10_000.0  # m: scans farther apart share nothing
@@ -163,33 +164,28 @@ def against_guess(result: RegistrationResult, guess: Guess | None) -> Registrati
 
 def _planar(T: np.ndarray) -> np.ndarray:
     """(x, y m, yaw rad) of a 4x4 T_target_source."""
-    return np.array([T[0, 3], T[1, 3], np.arctan2(T[1, 0], T[0, 0])])
+    return np.array([T[0, 3], T[1, 3], yaw_of(T)])
 
 
 def unconfirmed_indoors(
     search: RegistrationResult, guessed: RegistrationResult
 ) -> RegistrationResult:
     """``guessed``, suspect when it was registered indoors, is ok, and is not the pose the
-    search ended at (more than 0.5 m or 3 degrees from it). Indoors one registration's evidence
-    cannot tell the truth from a pose slid by a room or across a wall (docs/trust.md), and the
-    guess's refinement sees only the poses near it; the search's candidates and the free space
-    judged the whole floor. With approximate poses within 1 m and 5 degrees, the sweep's office
-    floors had two scans ok and wrong through such links: one 3.9 m along the floor, one
-    15 cm across a wall."""
-    if guessed.scene != "indoor" or not guessed.ok or same_pose(search, guessed):
+    search ended at (a distinct pose, :func:`~ndt_cli.ndt.rivals.distinct`: 0.5 m or 3 degrees
+    apart). Indoors one registration's evidence cannot tell the truth from a pose slid by a
+    room or across a wall (docs/trust.md), and the guess's refinement sees only the poses near
+    it; the search's candidates and the free space judged the whole floor. With approximate
+    poses within 1 m and 5 degrees, the sweep's office floors had two scans ok and wrong
+    through such links: one 3.9 m along the floor, one 15 cm across a wall."""
+    a, b = _planar(search.T_target_source), _planar(guessed.T_target_source)
+    if guessed.scene != "indoor" or not guessed.ok or not distinct(a, b):
         return guessed
-    d = np.linalg.inv(search.T_target_source) @ guessed.T_target_source
     text = (
-        f"indoors the guess's pose is not confirmed: the search ended {np.hypot(*d[:2, 3]):.2f} m "
-        f"and {abs(np.degrees(np.arctan2(d[1, 0], d[0, 0]))):.1f} deg from it"
+        f"indoors the guess's pose is not confirmed: the search ended "
+        f"{np.hypot(*(b[:2] - a[:2])):.2f} m and {abs(np.degrees(wrap_angle(b[2] - a[2]))):.1f} "
+        "deg from it"
     )
     return replace(guessed, status=Status.SUSPECT, warnings=(*guessed.warnings, text))
-
-
-def same_pose(a: RegistrationResult, b: RegistrationResult) -> bool:
-    """Two results end at one pose: within 0.5 m and 3 degrees of each other."""
-    d = np.linalg.inv(a.T_target_source) @ b.T_target_source
-    return bool(np.hypot(*d[:2, 3]) <= 0.5 and abs(np.degrees(np.arctan2(d[1, 0], d[0, 0]))) <= 3.0)
 
 
 def guess_text(guess: Guess | None) -> str:
