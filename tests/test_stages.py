@@ -18,7 +18,7 @@ from ndt_cli.ndt.coarse_to_fine import fit_weighted
 from ndt_cli.ndt.kernels import MATCHED, NACC, SCORE
 from ndt_cli.ndt.prepare import load_and_prepare
 from ndt_cli.ndt.quality import weakest_direction
-from ndt_cli.ndt.refine import icp, refine_pose
+from ndt_cli.ndt.refine import FACING_MARGIN, facing, icp, refine_pose
 from ndt_cli.ndt.register import register
 from ndt_cli.ndt.result import Status
 from ndt_cli.ndt.search import distinct_indices
@@ -150,6 +150,78 @@ def test_refinement_works_in_reduced_frames():
     assert not res.rejected
     rot, trans = transform_errors(res.T, T_true)
     assert rot < 0.02 and trans < 0.003, (rot, trans)
+
+
+def _seen_from(rng, y_scanner, face_y):
+    """What a scanner at (0, y_scanner, 1.5) sees of a room split by a 0.15 m partition
+    (x within 1.5 m, faces at y = 0 and 0.15): the floor, the far walls at x = 6 and y = -7 (seen
+    round the partition's ends) and the partition's face ``face_y``; in the scanner's frame."""
+    parts = [
+        _plane(rng, [0, 0, 0], [1, 0, 0], [0, 1, 0], 8, 3000),
+        _plane(rng, [6, 0, 1.5], [0, 1, 0], [0, 0, 1], 3, 1500),
+        _plane(rng, [0, -7, 1.5], [1, 0, 0], [0, 0, 1], 3, 800),
+        _plane(rng, [0, face_y, 1.25], [1, 0, 0], [0, 0, 1.25], 1.5, 8000),
+    ]
+    pts = np.concatenate(parts) + rng.normal(0, 0.002, (13300, 3))
+    return pts - [0.0, y_scanner, 1.5]
+
+
+def test_facing_keeps_surfaces_both_scanners_saw_from_the_same_side():
+    q = np.zeros((4, 3))
+    n = np.array([[0, 1.0, 0], [0, -1.0, 0], [0, 1.0, 0], [0, 1.0, 0]])  # sign is arbitrary
+    seen_from = np.array([0.0, -2.0, 0.0])
+    other = np.array([[0, -3.0, 0], [0, -3.0, 0], [0, 2.0, 0], [0, 0.5 * FACING_MARGIN, 0]])
+    kept = [facing(q[k : k + 1], n[k : k + 1], seen_from, other[k])[0] for k in range(4)]
+    assert kept == [True, True, False, True]  # same side, either normal; opposite; edge-on
+
+
+def test_icp_does_not_match_the_two_faces_of_a_thin_wall():
+    """Two scanners on either side of a 0.15 m partition: point-to-plane ICP started at the
+    truth matches one face to the other and slides by part of the wall's thickness; told
+    where the scanners stand, it matches only what both saw from the same side."""
+    rng = np.random.default_rng(6)
+    target, source = _seen_from(rng, -2.0, 0.0), _seen_from(rng, 2.0, 0.15)
+    r_t, r_s = np.array([0.3, 0.1, -1.5]), np.array([-0.2, 0.4, -1.5])  # reduction points
+    T_true = _rigid([0, 0, 0], [0.0, 4.0, 0.0])  # scanner B's frame to scanner A's
+    cfg, zero = RefineConfig(), np.zeros(3)
+    args = (target - r_t, source - r_s, r_t, r_s, T_true, cfg, 0.2)
+    blind = refine_pose(*args)
+    told = refine_pose(*args, scanners=(zero, zero))  # each scanner at its frame's origin
+    assert transform_errors(blind.T, T_true)[1] > 0.05  # the faces pull it off the truth
+    rot, trans = transform_errors(told.T, T_true)
+    assert rot < 0.02 and trans < 0.005, (rot, trans)
+
+
+def _pillar_seen(rng, face):
+    """A room with a 1 m square pillar (x 0-1, y 3-4, 2.5 m high) of which one scanner saw the
+    front face (y = 3) and the other the side face (x = 1), both the floor and two far walls;
+    world frame (m)."""
+    parts = [
+        _plane(rng, [0, 0, 0], [1, 0, 0], [0, 1, 0], 8, 3000),
+        _plane(rng, [-6, 0, 1.5], [0, 1, 0], [0, 0, 1], 4, 600),
+        _plane(rng, [0, 10, 1.5], [1, 0, 0], [0, 0, 1], 4, 600),
+    ]
+    if face == "front":
+        parts.append(_plane(rng, [0.5, 3, 1.25], [0.5, 0, 0], [0, 0, 1.25], 1, 6000))
+    else:
+        parts.append(_plane(rng, [1, 3.5, 1.25], [0, 0.5, 0], [0, 0, 1.25], 1, 6000))
+    pts = np.concatenate(parts)
+    return pts + rng.normal(0, 0.002, pts.shape)
+
+
+def test_icp_does_not_match_a_face_to_the_one_round_the_corner():
+    """Near the pillar's edge the side face the source saw lies within centimetres of the
+    front face the target saw; matched to it (its normal 90 degrees off), the pose slides
+    by 13-18 cm. Pairs whose normals disagree by more than 30 degrees are not matched."""
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        target = _pillar_seen(rng, "front") - [0.5, 0.0, 1.5]  # scanner at (0.5, 0, 1.5)
+        source = _pillar_seen(rng, "side") - [5.0, 3.5, 1.5]  # scanner at (5, 3.5, 1.5)
+        T_true = _rigid([0, 0, 0], [4.5, 3.5, 0.0])
+        zero = np.zeros(3)
+        res = refine_pose(target, source, zero, zero, T_true, RefineConfig(), 0.2)
+        rot, trans = transform_errors(res.T, T_true)
+        assert rot < 0.02 and trans < 0.003, (seed, rot, trans)
 
 
 def test_distinct_indices_merges_near_poses_and_keeps_the_best_first():

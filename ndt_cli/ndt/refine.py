@@ -18,6 +18,21 @@ from ndt_cli.core.geometry import SURFACES, Surfaces, normals, voxel_thin
 from ndt_cli.core.transforms import rotation_from_vector, transform_errors, translation
 
 _MIN_PLANARITY = 0.7  # target points whose neighbourhood is not clearly planar are not used
+_COMPATIBLE = np.cos(
+    np.radians(30.0)
+)  # a planar source point's normal within 30 deg of its match's
+FACING_MARGIN = 0.1  # m: a scanner nearer a surface's plane than this sees it edge-on
+
+
+def facing(q: np.ndarray, n: np.ndarray, seen_from: np.ndarray, other: np.ndarray) -> np.ndarray:
+    """Per target point ``q`` (N,3) with unit normal ``n`` (either sign): whether the other
+    scanner (at ``other``) stands on the side of the surface that this scanner (at
+    ``seen_from``) saw, or within :data:`FACING_MARGIN` m of its plane. Where it does not,
+    the two scans saw opposite faces (of a thin wall, a trunk, a door leaf), which are
+    centimetres apart: matching them would shift the pose by the wall's thickness."""
+    a = np.einsum("ij,ij->i", n, seen_from - q)
+    b = np.einsum("ij,ij->i", n, other - q)
+    return (a * b > 0) | (np.minimum(np.abs(a), np.abs(b)) < FACING_MARGIN)
 
 
 @dataclass(frozen=True)
@@ -54,6 +69,24 @@ class IcpResult:
         return V[:, 0], float(w[0] / w[-1]) if w[-1] > 0 else 0.0
 
 
+class _Normals:
+    """Normals and planarity of ``points`` (from their neighbours in ``grid``), computed for
+    the points asked for only, once each."""
+
+    def __init__(self, points: np.ndarray, grid: object, surfaces: Surfaces) -> None:
+        self.points, self.grid, self.surfaces = points, grid, surfaces
+        self.n = np.zeros((len(points), 3))
+        self.planarity = np.full(len(points), np.nan)  # NaN: not computed yet
+
+    def at(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(normals, planarity) of the points ``idx``."""
+        need = np.unique(idx[np.isnan(self.planarity[idx])])
+        if len(need):
+            found = normals(self.points[need], self.grid, surfaces=self.surfaces)
+            self.n[need], self.planarity[need] = found
+        return self.n[idx], self.planarity[idx]
+
+
 def icp(
     target: np.ndarray,
     source: np.ndarray,
@@ -68,16 +101,21 @@ def icp(
     max_source_points: int = 20_000,
     overlap_distance: float = 0.2,
     surfaces: Surfaces = SURFACES,
+    scanners: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> IcpResult:
     """Refine ``T0`` (source -> target) by robust point-to-plane ICP. ``voxel=None``: the
     points are thinned already, to about ``spacing`` metres (it sizes the target's grid).
-    Target normals are computed for the points ICP reaches only."""
+    Target normals are computed for the points ICP reaches only. ``scanners``: the target's
+    scanner in the target's frame and the source's in the source's (m); when given, a pair
+    whose surface the two scanners saw from opposite sides is not matched (:func:`facing`)."""
     tgt = target if voxel is None else voxel_thin(target, voxel)
-    src = source if voxel is None else voxel_thin(source, voxel)
-    src = src[:: max(1, len(src) // max_source_points)]  # a regular stride: deterministic
-    grid = surfaces.grid(tgt, spacing if voxel is None else voxel)
-    n = np.zeros((len(tgt), 3))
-    planarity = np.full(len(tgt), np.nan)  # NaN: not computed yet
+    src_all = source if voxel is None else voxel_thin(source, voxel)
+    stride = max(1, len(src_all) // max_source_points)  # a regular stride: deterministic
+    src = src_all[::stride]
+    cell = spacing if voxel is None else voxel
+    grid = surfaces.grid(tgt, cell)
+    tgt_normals = _Normals(tgt, grid, surfaces)
+    src_normals = _Normals(src_all, surfaces.grid(src_all, cell), surfaces)
     T = np.array(T0, dtype=float)
     dist = max_distance
     it = 0
@@ -88,10 +126,16 @@ def icp(
         p = src @ T[:3, :3].T + T[:3, 3]
         d, j = surfaces.neighbours.nearest(grid, p, dist)
         ok = np.isfinite(d)
-        need = np.unique(j[ok][np.isnan(planarity[j[ok]])])
-        if len(need):
-            n[need], planarity[need] = normals(tgt[need], grid, surfaces=surfaces)
-        ok[ok] &= planarity[j[ok]] > _MIN_PLANARITY
+        n_t, planar_t = tgt_normals.at(j[ok])
+        n_s, planar_s = src_normals.at(np.flatnonzero(ok) * stride)
+        ok[ok] = (planar_t > _MIN_PLANARITY) & (
+            (planar_s <= _MIN_PLANARITY)
+            | (np.abs(np.einsum("ij,ij->i", n_s @ T[:3, :3].T, n_t)) > _COMPATIBLE)
+        )
+        n = tgt_normals.n
+        if scanners is not None:
+            seen_by_source = T[:3, :3] @ scanners[1] + T[:3, 3]
+            ok[ok] &= facing(tgt[j[ok]], n[j[ok]], scanners[0], seen_by_source)
         if ok.sum() < 6:
             break
         pi, ni = p[ok], n[j[ok]]
@@ -160,9 +204,11 @@ def refine_pose(
     refine: RefineConfig,
     overlap_distance: float,
     surfaces: Surfaces = SURFACES,
+    scanners: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Refinement:
     """ICP of the scans' thinned points (each minus its reduction point) from ``T``; a
-    correction larger than ``refine.max_correction`` (m, or degrees) is not applied."""
+    correction larger than ``refine.max_correction`` (m, or degrees) is not applied.
+    ``scanners``: each scanner's position in its scan's frame (m), when known."""
     if target_points is None or source_points is None:
         return Refinement(T, start=T)
     T_red = translation(-target_reduction) @ T @ translation(source_reduction)
@@ -178,6 +224,9 @@ def refine_pose(
         iterations=refine.iterations,
         overlap_distance=overlap_distance,
         surfaces=surfaces,
+        scanners=None
+        if scanners is None
+        else (scanners[0] - target_reduction, scanners[1] - source_reduction),
     )
     moved_deg, moved_m = transform_errors(res.T, T_red)
     if (

@@ -52,7 +52,7 @@ from ndt_cli.ndt.result import Deeper, LevelStats, RegistrationResult, Rival
 from ndt_cli.ndt.rivals import Judged, describe_rival, judge
 from ndt_cli.ndt.search import global_start, start_search
 from ndt_cli.ndt.terrain import height_offset
-from ndt_cli.ndt.visibility import free_space_share, margin
+from ndt_cli.ndt.visibility import free_space_share, margin, scanner_inside
 
 
 @dataclass(frozen=True)
@@ -162,7 +162,17 @@ def _refine(
         cfg.refine,
         cfg.quality.overlap_distance,
         surfaces,
+        _scanners(target, source),
     )
+
+
+def _scanners(target: PreparedScan, source: PreparedScan) -> tuple[np.ndarray, np.ndarray] | None:
+    """Both scanners at their frames' origins (m), when both scans are in their scanner's own
+    frame (:func:`~ndt_cli.ndt.visibility.scanner_inside`); None when either is not."""
+    for scan in (target, source):
+        if scan.points3d is None or not scanner_inside(scan.points3d + scan.reduction):
+            return None
+    return np.zeros(3), np.zeros(3)
 
 
 MAX_JUDGED = 16  # candidates, most evidence first, whose free space is measured
