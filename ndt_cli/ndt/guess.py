@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ndt_cli.config.schema import Config
+from ndt_cli.core.transforms import wrap_angle
 from ndt_cli.ndt.backend import Kernels
 from ndt_cli.ndt.coarse_to_fine import VERIFY_CELLS, Ranked, coarse_to_fine
 from ndt_cli.ndt.levels import SourceSampler, TargetMaps, level_stats, run_level
@@ -114,7 +115,7 @@ def reach_of(pose: np.ndarray, p0: np.ndarray, init: Guess) -> tuple[float, floa
     reduced frames): metres, degrees, and whether that is beyond :data:`GUESS_REACH` times
     its uncertainty (a guess of 45 degrees or more allows every heading)."""
     metres = float(np.hypot(pose[0] - p0[0], pose[1] - p0[1]))
-    degrees = abs(float(np.degrees(np.angle(np.exp(1j * (pose[2] - p0[2]))))))
+    degrees = abs(float(np.degrees(wrap_angle(pose[2] - p0[2]))))
     far = metres > GUESS_REACH * init.sigma_m
     turned = init.sigma_deg < ALL_ROUND_DEG and degrees > GUESS_REACH * init.sigma_deg
     return metres, degrees, bool(far or turned)

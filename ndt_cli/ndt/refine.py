@@ -87,6 +87,43 @@ class _Normals:
         return self.n[idx], self.planarity[idx]
 
 
+class _Matcher:
+    """Pairs of source and target points that may be matched: the nearest target point within
+    a distance, on a clearly planar surface, that the source point's own normal (where planar)
+    and the scanners' sides (when known, :func:`facing`) agree with. Frames of the inputs."""
+
+    def __init__(
+        self,
+        tgt: np.ndarray,
+        src_all: np.ndarray,
+        stride: int,
+        cell: float,
+        surfaces: Surfaces,
+        scanners: tuple[np.ndarray, np.ndarray] | None,
+    ) -> None:
+        self.tgt, self.stride, self.surfaces, self.scanners = tgt, stride, surfaces, scanners
+        self.grid = surfaces.grid(tgt, cell)
+        self.tgt_normals = _Normals(tgt, self.grid, surfaces)
+        self.src_normals = _Normals(src_all, surfaces.grid(src_all, cell), surfaces)
+
+    def pairs(
+        self, p: np.ndarray, T: np.ndarray, dist: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """For the source points ``p`` (moved by ``T``, the target's frame): which are paired,
+        and the target index and unit normal of each one paired."""
+        d, j = self.surfaces.neighbours.nearest(self.grid, p, dist)
+        ok = np.isfinite(d)
+        n_t, planar_t = self.tgt_normals.at(j[ok])
+        n_s, planar_s = self.src_normals.at(np.flatnonzero(ok) * self.stride)
+        alike = np.abs(np.einsum("ij,ij->i", n_s @ T[:3, :3].T, n_t)) > _COMPATIBLE
+        keep = (planar_t > _MIN_PLANARITY) & ((planar_s <= _MIN_PLANARITY) | alike)
+        if self.scanners is not None:
+            seen_by_source = T[:3, :3] @ self.scanners[1] + T[:3, 3]
+            keep &= facing(self.tgt[j[ok]], n_t, self.scanners[0], seen_by_source)
+        ok[ok] = keep
+        return ok, j[ok], self.tgt_normals.n[j[ok]]
+
+
 def icp(
     target: np.ndarray,
     source: np.ndarray,
@@ -113,9 +150,7 @@ def icp(
     stride = max(1, len(src_all) // max_source_points)  # a regular stride: deterministic
     src = src_all[::stride]
     cell = spacing if voxel is None else voxel
-    grid = surfaces.grid(tgt, cell)
-    tgt_normals = _Normals(tgt, grid, surfaces)
-    src_normals = _Normals(src_all, surfaces.grid(src_all, cell), surfaces)
+    matcher = _Matcher(tgt, src_all, stride, cell, surfaces, scanners)
     T = np.array(T0, dtype=float)
     dist = max_distance
     it = 0
@@ -124,22 +159,11 @@ def icp(
     pi = ni = w = np.zeros((0, 3))
     for it in range(1, iterations + 1):  # noqa: B007
         p = src @ T[:3, :3].T + T[:3, 3]
-        d, j = surfaces.neighbours.nearest(grid, p, dist)
-        ok = np.isfinite(d)
-        n_t, planar_t = tgt_normals.at(j[ok])
-        n_s, planar_s = src_normals.at(np.flatnonzero(ok) * stride)
-        ok[ok] = (planar_t > _MIN_PLANARITY) & (
-            (planar_s <= _MIN_PLANARITY)
-            | (np.abs(np.einsum("ij,ij->i", n_s @ T[:3, :3].T, n_t)) > _COMPATIBLE)
-        )
-        n = tgt_normals.n
-        if scanners is not None:
-            seen_by_source = T[:3, :3] @ scanners[1] + T[:3, 3]
-            ok[ok] &= facing(tgt[j[ok]], n[j[ok]], scanners[0], seen_by_source)
+        ok, j, n = matcher.pairs(p, T, dist)
         if ok.sum() < 6:
             break
-        pi, ni = p[ok], n[j[ok]]
-        r = np.einsum("ij,ij->i", pi - tgt[j[ok]], ni)
+        pi, ni = p[ok], n
+        r = np.einsum("ij,ij->i", pi - tgt[j], ni)
         w = np.where(np.abs(r) <= huber, 1.0, huber / np.maximum(np.abs(r), 1e-12))
         J = np.column_stack([np.cross(pi, ni), ni])
         H = (J * w[:, None]).T @ J
@@ -161,7 +185,8 @@ def icp(
     if len(pi):  # the curvature about the matched points' centroid: independent of the frame
         J = np.column_stack([np.cross(pi - centroid, ni), ni])
         H = (J * w[:, None]).T @ J
-    d, _ = surfaces.neighbours.nearest(grid, src @ T[:3, :3].T + T[:3, 3], overlap_distance)
+    moved = src @ T[:3, :3].T + T[:3, 3]
+    d, _ = surfaces.neighbours.nearest(matcher.grid, moved, overlap_distance)
     return IcpResult(T, rms, inliers, it, H, float(np.isfinite(d).mean()), centroid)
 
 
