@@ -178,6 +178,19 @@ def test_a_search_that_ends_beyond_the_guess_is_suspect():
     assert better(turned, _r(False, 100.0)) is turned  # no guess: nothing to contradict
 
 
+def test_a_degenerate_result_beyond_the_guess_is_suspect():
+    """A degenerate link fixes rotation and height in the network; one whose pose is 45 m
+    along the street from a guess within 7 m contradicts it and is suspect. Within the reach,
+    a degenerate result stays degenerate (its weak direction is no contradiction)."""
+    guess = Guess(pose2d_matrix(78.0, 0.0, 0.0), 6.9, 7.1)
+    slid = _R(Status.DEGENERATE, 500.0, T_target_source=pose2d_matrix(33.0, 0.0, 0.0))
+    kept = better(slid, _r(False, 100.0), guess)
+    assert kept.status is Status.SUSPECT
+    assert "45.00 m and 0.0 deg from the guess" in kept.warnings[-1]
+    near = _R(Status.DEGENERATE, 500.0, T_target_source=pose2d_matrix(70.0, 1.0, 0.02))
+    assert better(near, _r(False, 100.0), guess).status is Status.DEGENERATE
+
+
 def test_a_guess_allows_the_poses_within_three_times_its_uncertainty():
     """Reach in the scans' reduced frames: the source's origin within 3 sigma_m of where the
     guess puts it, the heading within 3 sigma_deg (any heading when it is 45 degrees or more);

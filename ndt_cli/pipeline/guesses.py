@@ -153,8 +153,10 @@ def against_guess(result: RegistrationResult, guess: Guess | None) -> Registrati
     a guess within 7 degrees contradicts it: with approximate poses the sweep's office floors
     had three scans ok and turned by 180 degrees through such a link, kept where the guess's
     own result was not confirmed. A guess that lies about its uncertainty makes right links
-    suspect too: the warning says how far the data put them from it."""
-    if guess is None or not result.ok:
+    suspect too: the warning says how far the data put them from it. A degenerate result
+    beyond the reach is suspect as well: the network would still take its rotation and its
+    height, and the height of a pose slid 44 m along a 3 % grade is 1.3 m off."""
+    if guess is None or result.status not in (Status.OK, Status.DEGENERATE):
         return result
     text = beyond_text(_planar(result.T_target_source), _planar(guess.T_target_source), guess)
     if not text:
