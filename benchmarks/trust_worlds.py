@@ -53,6 +53,38 @@ def floors(quick: bool) -> list[FloorWorld]:
         F(seed=7, layout="open", corridor_width=2.0, ceiling=2.7, closed=0.1, furniture=0.3),
         F(seed=8, length=60.0, corridor_width=3.0, ceiling=3.3, spacing=(8, 12), room_scans=3),
         F(seed=9, corridor_width=2.6, ceiling=3.1, furniture=1.2, tilt_deg=0.8, spacing=(5, 9)),
+        *held_out_floors(),
+    ]
+
+
+def held_out_floors() -> list[FloorWorld]:
+    """Five floors added after the indoor rules were set, measured once: what the rules do
+    on layouts they were not chosen on."""
+    F = FloorWorld
+    return [
+        F(seed=21, length=50.0, corridor_width=2.3, closed=0.35, furniture=0.8, spacing=(6, 10)),
+        F(seed=22, layout="open", corridor_width=2.5, ceiling=2.9, closed=0.3),
+        F(
+            seed=23,
+            layout="single",
+            corridor_width=2.2,
+            ceiling=3.1,
+            closed=0.4,
+            furniture=1.8,
+            tilt_deg=0.6,
+            room_scans=3,
+        ),
+        F(seed=24, corridor_width=2.8, ceiling=2.75, closed=0.15, furniture=2.5, spacing=(5, 7)),
+        F(
+            seed=25,
+            layout="open",
+            length=56.0,
+            corridor_width=2.1,
+            ceiling=3.3,
+            closed=0.5,
+            furniture=0.5,
+            spacing=(7, 11),
+        ),
     ]
 
 
