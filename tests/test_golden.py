@@ -12,8 +12,9 @@ eigenvalues of their Hessians within 1 % (the search stops a little elsewhere, b
 brings every run to the same pose); iteration counts, the ambiguity (the score of the second
 best candidate the search met) and the run time not at all. CI runs these tests once more
 with ``NUMBA_CPU_NAME=generic`` (``.ci/run``). They were last rewritten when each scan's
-vertical came from its walls and its slices from heights above a ground model, and the
-network from the evidence of agreement.
+vertical came from its walls and its slices from heights above a ground model, the
+network from the evidence of agreement, and ICP stopped pairing surfaces the two scans saw
+differently (the sample street's last scan came 6 mm from the truth instead of 19 mm).
 """
 
 from __future__ import annotations

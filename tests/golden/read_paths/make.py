@@ -3,8 +3,9 @@ of 20,000 points (so every path of the reading is taken: chunks held, chunks str
 
 Run from the project folder, with the package it should pin first on the path:
 ``PYTHONPATH=<checkout> python tests/golden/read_paths/make.py``. The values in the repository
-were written by the code of commit 7fc18e1, before a LAZ file was decoded once and a scan held
-as integers, so the test holds the new reading to the old results.
+were first written by the code of commit 7fc18e1, before a LAZ file was decoded once and a
+scan held as integers, so the test held the new reading to the old results; they were written
+again when ICP stopped pairing surfaces the two scans saw differently (the reading unchanged).
 """
 
 from __future__ import annotations
