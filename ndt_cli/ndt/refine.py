@@ -18,9 +18,8 @@ from ndt_cli.core.geometry import SURFACES, Surfaces, normals, voxel_thin
 from ndt_cli.core.transforms import rotation_from_vector, transform_errors, translation
 
 _MIN_PLANARITY = 0.7  # target points whose neighbourhood is not clearly planar are not used
-_COMPATIBLE = np.cos(
-    np.radians(30.0)
-)  # a planar source point's normal within 30 deg of its match's
+# a planar source point is paired only with a target point whose normal is within 30 degrees
+_COMPATIBLE = np.cos(np.radians(30.0))
 FACING_MARGIN = 0.1  # m: a scanner nearer a surface's plane than this sees it edge-on
 
 
@@ -113,15 +112,16 @@ class _Matcher:
         and the target index and unit normal of each one paired."""
         d, j = self.surfaces.neighbours.nearest(self.grid, p, dist)
         ok = np.isfinite(d)
-        n_t, planar_t = self.tgt_normals.at(j[ok])
+        near = j[ok]
+        n_t, planar_t = self.tgt_normals.at(near)
         n_s, planar_s = self.src_normals.at(np.flatnonzero(ok) * self.stride)
         alike = np.abs(np.einsum("ij,ij->i", n_s @ T[:3, :3].T, n_t)) > _COMPATIBLE
         keep = (planar_t > _MIN_PLANARITY) & ((planar_s <= _MIN_PLANARITY) | alike)
         if self.scanners is not None:
             seen_by_source = T[:3, :3] @ self.scanners[1] + T[:3, 3]
-            keep &= facing(self.tgt[j[ok]], n_t, self.scanners[0], seen_by_source)
+            keep &= facing(self.tgt[near], n_t, self.scanners[0], seen_by_source)
         ok[ok] = keep
-        return ok, j[ok], self.tgt_normals.n[j[ok]]
+        return ok, near[keep], n_t[keep]
 
 
 def icp(
