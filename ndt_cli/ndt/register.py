@@ -49,7 +49,7 @@ from ndt_cli.ndt.prepare import PreparedScan, load_and_prepare_pair
 from ndt_cli.ndt.quality import Fit, Sights, Verdict, measure_fit, verdict_of
 from ndt_cli.ndt.refine import Refinement, refine_pose
 from ndt_cli.ndt.result import Deeper, LevelStats, RegistrationResult, Rival
-from ndt_cli.ndt.rivals import Judged, describe_rival, judge
+from ndt_cli.ndt.rivals import Judged, describe_rival, judge_measured
 from ndt_cli.ndt.search import global_start, start_search
 from ndt_cli.ndt.terrain import height_offset
 from ndt_cli.ndt.visibility import free_space_share, margin, scanner_inside
@@ -175,7 +175,6 @@ def _scanners(target: PreparedScan, source: PreparedScan) -> tuple[np.ndarray, n
     return np.zeros(3), np.zeros(3)
 
 
-MAX_JUDGED = 16  # candidates, most evidence first, whose free space is measured
 DEEPER_CANDIDATES = 16  # distinct poses of the global search refined when its favourite is doubtful
 DEEPER_SHARE = 0.03  # a kept pose with more of its points in free space is doubtful (true: 0-2 %)
 
@@ -225,19 +224,20 @@ def _allowed(
 
 
 def _judged(ranked: Ranked, target: PreparedScan, source: PreparedScan, cfg: Config) -> Judged:
-    """The candidates judged by what the scanners saw (:mod:`ndt_cli.ndt.rivals`): the
-    :data:`MAX_JUDGED` of most evidence measured, NaN for the rest and for scans that cannot
-    say what they saw (nothing is refuted then)."""
-    s = cfg.search
-    shares = np.full(len(ranked.poses), np.nan)
+    """The candidates judged by what the scanners saw (:func:`~ndt_cli.ndt.rivals.
+    judge_measured`); nothing is measured, and nothing refuted, for scans that cannot say
+    what they saw or with the check off."""
+    s, q = cfg.search, cfg.quality
+    ambiguity = (q.max_ambiguity, min(q.max_ambiguity, q.max_ambiguity_turned))
     sights = (target.sight, source.sight)
+    measure = None
     if s.free_space_ratio > 0.0 and sights[0] is not None and sights[1] is not None:
         gap = margin(cfg.refine.voxel)
-        for k, pose in enumerate(ranked.poses[:MAX_JUDGED]):
-            shares[k] = free_space_share(*sights, lifted(target, source, pose), gap)
-    q = cfg.quality
-    ambiguity = (q.max_ambiguity, min(q.max_ambiguity, q.max_ambiguity_turned))
-    return judge(ranked, shares, s.free_space_ratio, s.free_space_share, ambiguity)
+
+        def measure(k: int) -> float:
+            return free_space_share(*sights, lifted(target, source, ranked.poses[k]), gap)
+
+    return judge_measured(ranked, measure, s.free_space_ratio, s.free_space_share, ambiguity)
 
 
 def _rivals(
