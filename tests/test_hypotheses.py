@@ -3,6 +3,8 @@ expected choice worked out from them."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ndt_cli.pipeline.graph import CHI2_6_999, Edge
@@ -132,3 +134,27 @@ def test_a_triangle_that_closes_as_well_with_rivals_stays_undecided():
     }
     got = choose(groups, poses, hyps, CHI2_6_999, 0.5)
     assert all(c.chosen is None for c in got.values())
+
+
+def _registered(status, **fields):
+    from ndt_cli.ndt.result import RegistrationResult
+    from ndt_cli.pipeline.links import Link
+
+    r = RegistrationResult(np.eye(4), status, True, 1.0, 1.0, 1.0, (), (), (), np.eye(3), 0, 0, 0)
+    return Link(0, 0, 1, result=replace(r, **fields))
+
+
+def test_a_link_without_rivals_and_determined_everywhere_is_one_a_cycle_can_check():
+    """The network holds such a link even when its gate doubted it and the plan did not pair
+    it; one with rivals, a weak direction or refuted by its data it does not."""
+    from ndt_cli.ndt.result import Rival, Status
+    from ndt_cli.pipeline.solution import determined, firm
+
+    rival = Rival(np.eye(4), np.eye(3), 0.9, 0.0, "a pose turned +180.0 deg and 7.00 m away")
+    doubted = _registered(Status.SUSPECT)
+    assert firm(doubted) and determined(doubted)
+    weak = _registered(Status.SUSPECT, weak_direction=np.array([1.0, 0.0, 0.0]))
+    assert firm(weak) and not determined(weak)
+    assert not firm(_registered(Status.SUSPECT, rivals=(rival,)))
+    assert not firm(_registered(Status.SUSPECT, refuted=True))
+    assert not firm(_registered(Status.FAILED))

@@ -16,6 +16,8 @@ from ndt_cli.ndt.quality import Sights, in_bin_refutes
 from ndt_cli.ndt.register import register
 from ndt_cli.ndt.result import Status
 from ndt_cli.pipeline.chain import run_chain, scene_of
+from ndt_cli.pipeline.result import Dropped
+from ndt_cli.pipeline.solution import determined
 from ndt_cli.pipeline.verify import NodeStatus
 from ndt_cli.sim.indoor import FloorWorld, scan_floor
 
@@ -61,6 +63,8 @@ def test_no_scan_of_an_office_floor_is_ok_and_wrong(office, tmp_path):
     named = [k for k in result.links if k.result is not None and k.result.rivals]
     assert all("turned" in r.text and "m away" in r.text for k in named for r in k.result.rivals)
     assert np.isfinite([k.result.free_space_around for k in result.links if k.result]).all()
+    left_out = [t.link for t in result.tried if t.why is Dropped.NOT_PLANNED]
+    assert not [k for k in left_out if determined(k)]  # a cycle may confirm them: all kept
 
 
 @pytest.fixture(scope="module")

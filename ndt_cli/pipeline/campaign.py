@@ -69,7 +69,7 @@ from ndt_cli.pipeline.network import (
 from ndt_cli.pipeline.options import NetworkOptions
 from ndt_cli.pipeline.result import ChainResult, ScanReport, scan_report, tried_links
 from ndt_cli.pipeline.scans import UNREADABLE, DuplicateScanError, identity, scan_names
-from ndt_cli.pipeline.solution import NetworkSolution, solve
+from ndt_cli.pipeline.solution import NetworkSolution, determined, solve
 
 log = logging.getLogger(__name__)
 progress = logging.getLogger("ndt_cli.progress")
@@ -435,8 +435,11 @@ class Campaign:
 
     def _network(self) -> list[Link]:
         """The links of the result, indexed 0, 1, ...: the plan, the user's pairs, every link
-        its gate passed (evidence against a placement built on wrong links) and those tried for
-        scans no ok link connects (so that the outputs say why)."""
+        its gate passed (evidence against a placement built on wrong links), every firm link
+        determined in every direction (:func:`~ndt_cli.pipeline.solution.determined`: one its
+        gate doubted, which placement left aside, a cycle can still confirm; indoors, right
+        links between neighbours on a corridor past a room scan)
+        and those tried for scans no ok link connects (so that the outputs say why)."""
         user = {k.pair for k in self.net.pairs}
         if self.net.classic:
             chain = {k.pair for k in classic_chain(len(self.paths), self.unreadable)}
@@ -444,7 +447,7 @@ class Campaign:
         else:
             linked = {i for p, k in self.links.items() if k.ok for i in p}  # scans with an ok link
             lonely = {p for p in self.links if not set(p) & linked}
-            passed = {p for p, k in self.links.items() if k.ok}
+            passed = {p for p, k in self.links.items() if k.ok or determined(k)}
             pairs = self.plan | user | lonely | passed
         chosen = sorted(p for p in pairs if p in self.links)
         return [

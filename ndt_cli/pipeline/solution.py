@@ -94,6 +94,20 @@ def usable(link: Link) -> bool:
     return link.status in USABLE and not link.result.refuted
 
 
+def firm(link: Link) -> bool:
+    """A usable link without rivals: the network can check it against others around a cycle,
+    whatever its own gate said (:mod:`ndt_cli.pipeline.verify`)."""
+    return usable(link) and not link.result.rivals
+
+
+def determined(link: Link) -> bool:
+    """A firm link whose pose the data fix in every direction (no weak one): a cycle of
+    links can check it horizontally. A weak link (a corridor's) fixes its rotation and height
+    only, and a rotation by 180 degrees agrees with a wrong rival chosen on the same cycle:
+    on an office floor one such link, 40 m off and turned, made three scans ok and wrong."""
+    return firm(link) and link.result.weak_direction is None
+
+
 def link_covariance(r: RegistrationResult) -> np.ndarray:
     """6x6 covariance of a link between the reduced frames (GTSAM Pose3 tangent, see
     :mod:`ndt_cli.pipeline.covariance`): from ICP's normal matrix when ICP refined it, else
@@ -251,10 +265,10 @@ def _network(
     with rivals, and of the firm links that only bridges would keep, against them
     (:mod:`ndt_cli.pipeline.hypotheses`), and verify the firm and chosen links together."""
     usable_ids = [k for k, link in enumerate(links) if usable(link)]
-    firm = [k for k in usable_ids if not links[k].result.rivals]
-    edges = [_edge(links[k]) for k in firm]
+    firm_ids = [k for k in usable_ids if firm(links[k])]
+    edges = [_edge(links[k]) for k in firm_ids]
     v = verify(n_scans, anchor, edges, trust_bridges=trust_bridges)
-    loose = {firm[i] for i, e in enumerate(v.edges) if _unchecked(e)}
+    loose = {firm_ids[i] for i, e in enumerate(v.edges) if _unchecked(e)}
     # a degenerate link says nothing of where its scans are horizontally: it decides nothing
     decided = [k for k in usable_ids if links[k].status is not Status.DEGENERATE]
     hyps = {k: _hypotheses(links[k], k) for k in decided if links[k].result.rivals}
@@ -263,11 +277,11 @@ def _network(
     choices = choose(groups, poses, hyps, v.threshold, ambiguity)
     chosen = sorted(k for k, c in choices.items() if c.chosen is not None)
     if chosen:
-        used = [k for k in firm if k not in loose] + chosen
-        edges = [_edge(links[k]) if k in firm else choices[k].chosen.edge for k in used]
+        used = [k for k in firm_ids if k not in loose] + chosen
+        edges = [_edge(links[k]) if k in firm_ids else choices[k].chosen.edge for k in used]
         v = verify(n_scans, anchor, edges, trust_bridges=trust_bridges)
     else:
-        used = firm
+        used = firm_ids
     left = {k: hyps[k][0] for k in choices if k not in chosen and not choices[k].rejected}
     texts = {k: _why_left(links[k]) for k in left}
     return _Network(v, edges, used, choices, left, texts)
