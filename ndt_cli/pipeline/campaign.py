@@ -438,8 +438,8 @@ class Campaign:
         its gate passed (evidence against a placement built on wrong links), every firm link
         determined in every direction (:func:`~ndt_cli.pipeline.solution.determined`: one its
         gate doubted, which placement left aside, a cycle can still confirm; indoors, right
-        links between neighbours on a corridor past a room scan)
-        and those tried for scans no ok link connects (so that the outputs say why)."""
+        links between neighbours on a corridor past a room scan) and those tried for scans no
+        ok link connects (so that the outputs say why)."""
         user = {k.pair for k in self.net.pairs}
         if self.net.classic:
             chain = {k.pair for k in classic_chain(len(self.paths), self.unreadable)}
@@ -447,8 +447,8 @@ class Campaign:
         else:
             linked = {i for p, k in self.links.items() if k.ok for i in p}  # scans with an ok link
             lonely = {p for p in self.links if not set(p) & linked}
-            passed = {p for p, k in self.links.items() if k.ok or determined(k)}
-            pairs = self.plan | user | lonely | passed
+            checkable = {p for p, k in self.links.items() if k.ok or determined(k)}
+            pairs = self.plan | user | lonely | checkable
         chosen = sorted(p for p in pairs if p in self.links)
         return [
             replace(self.links[p], index=n, kind=kind_of(p, user)) for n, p in enumerate(chosen)
