@@ -268,6 +268,10 @@ def test_a_shuffled_route_is_placed_by_its_coarse_matches_with_the_same_poses(tm
             files, Config(), tmp_path / "a", jobs=2, anchor=order.index(0), resume=True
         )
     assert any("no hint" in r.getMessage() for r in caplog.records)
+    # each scan out of order is registered to its best coarse matches at once, not beside the
+    # scans placed so far in turn (a scan whose neighbours were not placed yet paid 5 or 6)
+    registered = len(shuffled.links) + len(shuffled.tried)
+    assert registered <= 1.5 * (len(walk.links) + len(walk.tried)), registered
     assert shuffled.solution.roots == {0: order.index(0)}  # one cluster, in the anchor's frame
     ok_links: dict[int, list[int]] = {}  # per scan, the scans its ok links reach
     for link in shuffled.links:

@@ -5,9 +5,9 @@ the network, and :meth:`Campaign.add_scans` updates them in named steps:
    campaign order (the order scans came in: a walk, when there is one).
 2. **Summarise**: each new scan is read and prepared once (its sketch and preview are kept in
    the link store, so a campaign that resumes does not read it again).
-3. **Discover** (:mod:`ndt_cli.pipeline.discovery`): where each new scan is, from coarse
-   global matches with the placed scans; it is registered fully to the nearest of them, and
-   to the scans near it by known positions (control stations, however coarse), when given.
+3. **Discover** (:mod:`ndt_cli.pipeline.discovery`): each new scan registered to its neighbours
+   in campaign order (a walk) or to its best coarse matches (scans out of order), and to the
+   scans near it by known positions (control stations, however coarse), when given.
 4. **Consolidate**: place every scan again by all its links
    (:func:`~ndt_cli.pipeline.placement.replace_all`), plan the network from where the scans
    are (:func:`~ndt_cli.pipeline.network.plan_near`) and register what is missing, until the
@@ -39,6 +39,7 @@ from ndt_cli.errors import UserInterruptError, caused_by_interrupt
 from ndt_cli.ndt.overlap import CoarseMatch, coarse_match
 from ndt_cli.pipeline import placement
 from ndt_cli.pipeline.by_control import frame_of, home_group, station_links
+from ndt_cli.pipeline.coarse import match_pairs, partners
 from ndt_cli.pipeline.control import matched
 from ndt_cli.pipeline.datum import log_unused_controls
 from ndt_cli.pipeline.discovery import (
@@ -234,12 +235,11 @@ class Campaign:
         return list(range(first, len(self.paths)))
 
     def _discover(self, new: list[int]) -> None:
-        """Place each new scan in turn (not in the classic chain): in campaign order while the
-        order is a hint (:func:`order_is_a_hint`), then the rest by their coarse matches with
-        the placed scans, the best matched first (:meth:`_place_by_matches`). Once the order
-        is no hint, no bridge of the network is trusted: a pair proposed by a coarse match
-        alone and passed by its gate alone may be a street beside itself shifted by a few
-        blocks (a walk's order vouches for its neighbours, a shuffled one for none)."""
+        """Place each new scan (not in the classic chain): in campaign order while the order is
+        a hint (:func:`order_is_a_hint`); once it is not, every new scan together by its best
+        coarse matches (:meth:`_place_by_matches`), and no bridge of the network is trusted: a
+        pair proposed by a coarse match and passed by its gate alone may be a street beside
+        itself shifted by a few blocks (a walk's order vouches for its neighbours)."""
         if self.net.classic:
             return
         todo = [s for s in new if s in self.summaries]
@@ -248,42 +248,40 @@ class Campaign:
             if not order_is_a_hint(hinted):
                 progress.info("the campaign order is no hint: placing by coarse matches")
                 self.walked = False
-                self._place_by_matches(self._unplace_lonely(new) + todo)
+                self._place_by_matches([s for s in new if s in self.summaries])
                 return
             outcome = self._place(todo.pop(0))
             if outcome is not None:
                 hinted.append(outcome)
 
-    def _unplace_lonely(self, new: list[int]) -> list[int]:
-        """The new scans placed alone (a group of one, not the largest), taken out of place
-        to be placed again beside the others (their links are kept)."""
-        lonely = [g[0] for g in placement.groups(self.where)[1:] if len(g) == 1 and g[0] in new]
-        for scan in lonely:
-            del self.where[scan]
-        return lonely
-
     def _place_by_matches(self, todo: list[int]) -> None:
-        """Place ``todo`` one at a time, each time the scan whose best coarse match with a
-        placed scan scores highest (ties: campaign order), without order hints: so that each
-        scan is placed beside scans already placed, instead of alone and bridged later."""
-        best = {s: max((self._match(p, s).score for p in self.where), default=0.0) for s in todo}
-        while best:
-            scan = max(best, key=lambda s: (best[s], -s))
-            del best[scan]
-            self._place(scan, hints=False)  # placed now, in a group or alone
-            for s in best:
-                best[s] = max(best[s], self._match(scan, s).score)
+        """Place ``todo`` all at once: each registered, in one batch, to its best coarse matches
+        among all the scans (:func:`~ndt_cli.pipeline.coarse.partners`) and to those near it by
+        known positions; then every scan placed again by the links. Not one at a time beside
+        the scans placed: a scan whose neighbours were not placed yet has a wrong best match (a
+        street fits itself shifted), and paid five or six registrations before it was alone."""
+        every = sorted(set(self.where) | set(todo))
+        wanted = {pair_of(a, b) for a in todo for b in every if a != b} - self.coarse.keys()
+        sketches = {k: self.summaries[k].sketch for k in every}
+        self.coarse |= match_pairs(self.executor, sketches, wanted)
+        pairs: set[Pair] = set()
+        for scan in todo:
+            others = [o for o in every if o != scan]
+            found = [*partners(self.coarse, scan, others), *self._near(scan, others)]
+            pairs |= {pair_of(scan, o) for o in found}
+        self._register([self._planned(p, deep=False) for p in sorted(pairs)])
+        self.where = placement.replace_all(every, self.links)
 
-    def _place(self, scan: int, hints: bool = True) -> bool | None:
+    def _place(self, scan: int) -> bool | None:
         """Place the scan: first by its neighbours in campaign order (the scan before it, the
         best coarse match among them and those that agree with it are registered); without an
         ok link, by every placed scan: the best coarse prediction, registered to the
         :data:`PROBES` placed scans nearest to it, then the next distinct one, up to
         :data:`ATTEMPTS`. Scans near it by known positions (control stations) are registered
         in the first step too. Nothing fits: a group of its own, for now. Returns whether the
-        order hint placed it (None: no hint, ``hints`` False or no neighbour placed)."""
+        order hint placed it (None: no hint, or no neighbour placed)."""
         where = self.where
-        around = [scan + d for d in HINTS] if hints else []
+        around = [scan + d for d in HINTS]
         hinted = consensus(predict(scan, around, where, self._match))
         missed = False if hinted else None  # what to return unless the hint places it
         known = self._near(scan, where)

@@ -1,0 +1,46 @@
+"""Coarse matches of many pairs on a campaign's workers, and the partners they rank. The
+matches computed by the workers are compared with those computed here, one by one; the ranking
+with scores made up for the test."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from ndt_cli import sim
+from ndt_cli.config import Config
+from ndt_cli.ndt.overlap import coarse_match, sketch
+from ndt_cli.ndt.prepare import prepare
+from ndt_cli.pipeline.coarse import BATCH_PAIRS, match_pairs, partners
+from ndt_cli.pipeline.local_pool import WorkerPool
+
+
+@pytest.fixture(scope="module")
+def sketches():
+    route = sim.route(seed=4, n_scans=13, rays=(600, 90))
+    return {k: sketch(prepare(pts, Config())) for k, pts in enumerate(route.scans)}
+
+
+def test_the_workers_give_every_pair_the_match_computed_here(sketches):
+    pairs = [(a, b) for a in sketches for b in sketches if a < b]
+    assert len(pairs) > 2 * BATCH_PAIRS  # several batches, the last one short
+    pool = WorkerPool(2)
+    try:
+        found = match_pairs(pool, sketches, pairs)
+    finally:
+        pool.close()
+    assert sorted(found) == pairs
+    for a, b in pairs:
+        here = coarse_match(sketches[a], sketches[b])
+        assert found[(a, b)].score == here.score, (a, b)
+        assert np.array_equal(found[(a, b)].T_target_source, here.T_target_source), (a, b)
+
+
+def test_partners_are_the_best_scores_either_way_round_ties_by_index():
+    scores = {(0, 3): 0.5, (1, 3): 0.9, (3, 4): 0.7, (2, 3): 0.7, (3, 5): 0.1}
+    matches = {p: SimpleNamespace(score=s) for p, s in scores.items()}
+    assert partners(matches, 3, [0, 1, 2, 4, 5], k=2) == [1, 2]
+    assert partners(matches, 3, [0, 1, 2, 4, 5], k=3) == [1, 2, 4]
+    assert partners(matches, 3, [0, 5], k=2) == [0, 5]
