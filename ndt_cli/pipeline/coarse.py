@@ -14,7 +14,7 @@ from functools import partial
 
 from ndt_cli.ndt.overlap import CoarseMatch, Sketch, coarse_match
 from ndt_cli.pipeline.executors import Executor
-from ndt_cli.pipeline.network import Pair
+from ndt_cli.pipeline.network import Pair, pair_of
 from ndt_cli.pipeline.workers import Failure
 
 BATCH_PAIRS = 32  # pairs per task: about a second of work, against milliseconds of shipping
@@ -51,5 +51,5 @@ def partners(
 ) -> list[int]:
     """The ``k`` of ``others`` whose coarse match with ``scan`` (in ``matches``, keyed by
     (lo, hi)) scores highest; ties: the lowest index."""
-    score = {o: matches[(min(scan, o), max(scan, o))].score for o in others}
+    score = {o: matches[pair_of(scan, o)].score for o in others}
     return sorted(score, key=lambda o: (-score[o], o))[:k]
