@@ -238,6 +238,7 @@ def test_a_lock_whose_run_is_gone_is_waited_for_while_its_last_process_exits(tmp
     """A run killed with its workers: the lock names a process that is gone, while another of
     its processes still holds it for a moment. The next run waits and takes it."""
     out = tmp_path / "out"
+    done = tmp_path / "holder-done"
     gone = subprocess.Popen([sys.executable, "-c", "pass"])
     gone.wait()  # a process that existed and is gone
     holder = subprocess.Popen(
@@ -248,17 +249,21 @@ def test_a_lock_whose_run_is_gone_is_waited_for_while_its_last_process_exits(tmp
             "fd = os.open(sys.argv[1], os.O_RDWR | os.O_CREAT)\n"
             "fcntl.flock(fd, fcntl.LOCK_EX)\n"
             "os.write(fd, (sys.argv[2] + ' ndt-chain').encode())\n"
-            "print('held', flush=True); time.sleep(1.5)",
+            "print('held', flush=True); time.sleep(1.5)\n"
+            "open(sys.argv[3], 'w').close()",  # the lock is released only at exit, after this
             str(lock_path(out)),
             str(gone.pid),
+            str(done),
         ],
         stdout=subprocess.PIPE,
         text=True,
     )
     assert holder.stdout.readline().strip() == "held"
     with output_lock(out, "the next run"):
-        assert holder.poll() is not None  # taken only once the last holder was gone
-    holder.wait()
+        # Taken only once the holder finished. Not `poll()`: the kernel releases the lock when
+        # the holder's files close, a moment before the process can be waited for.
+        assert done.exists()
+    assert holder.wait(timeout=30) == 0
 
 
 @pytest.mark.slow
