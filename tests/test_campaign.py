@@ -100,19 +100,30 @@ def test_inserting_a_scan_in_the_middle_reuses_every_earlier_link(street8, tmp_p
     assert before <= _link_files(out)  # and no link file was renamed or dropped
 
 
-@pytest.mark.slow
-def test_a_shuffled_street_gives_the_same_result_as_the_street_in_order(street8, tmp_path):
-    files, poses = street8
+@pytest.fixture(scope="module")
+def shuffled8(street8, tmp_path_factory):
+    """The eight scans chained in order and, renamed in a random order, shuffled (anchored on
+    scan 0): the file order, and both result folders."""
+    files, _ = street8
+    root = tmp_path_factory.mktemp("shuffled8")
     order = np.random.default_rng(3).permutation(len(files))  # file k holds scan order[k]
-    mixed = tmp_path / "mixed"
+    mixed = root / "mixed"
     mixed.mkdir()
     for k, scan in enumerate(order):
         (mixed / f"scan_{k}.laz").write_bytes(files[scan].read_bytes())
     anchor = f"scan_{int(np.flatnonzero(order == 0)[0])}.laz"  # scan 0, wherever it is now
-    a, b = tmp_path / "in_order", tmp_path / "shuffled"
+    a, b = root / "in_order", root / "shuffled"
     assert runner.invoke(chain_app, [*map(str, files), "-o", str(a), "-q"]).exit_code == 0
-    args = [*map(str, sorted(mixed.glob("*.laz"))), "-o", str(b), "-q", "--anchor", anchor]
+    scans = sorted(mixed.glob("*.laz"))
+    args = [*map(str, scans), "-o", str(b), "-q", "--anchor", anchor]
     assert runner.invoke(chain_app, args).exit_code == 0  # every scan ok
+    return order, scans, a, b
+
+
+@pytest.mark.slow
+def test_a_shuffled_street_gives_the_same_result_as_the_street_in_order(street8, shuffled8):
+    _, poses = street8
+    order, _, a, b = shuffled8
     in_order, shuffled = read_pose_list(a / "poses.txt"), read_pose_list(b / "poses.txt")
     inv0 = np.linalg.inv(poses[0])
     for k, scan in enumerate(order):
@@ -127,24 +138,21 @@ def test_a_shuffled_street_gives_the_same_result_as_the_street_in_order(street8,
 
 
 @pytest.mark.slow
-def test_coarse_positions_of_a_shuffled_street_choose_links_and_do_no_harm(street8, tmp_path):
+def test_coarse_positions_of_a_shuffled_street_choose_links_and_do_no_harm(
+    street8, shuffled8, tmp_path
+):
     """A scanner's own GNSS (metres) on every standpoint, the street shuffled: the candidates
     by position are registered (no more registrations than without them), every scan is ok
     and right relative to the others, and the world is the positions' frame."""
-    files, poses = street8
-    order = np.random.default_rng(8).permutation(len(files))
-    mixed = tmp_path / "mixed"
-    mixed.mkdir()
+    _, poses = street8
+    order, scans, _, plain = shuffled8
     rng = np.random.default_rng(1)
     rows = []
     for k, scan in enumerate(order):
-        (mixed / f"scan_{k}.laz").write_bytes(files[scan].read_bytes())
         x, y, z = poses[scan][:3, 3] + rng.normal(0.0, [1.5, 1.5, 2.0])
         rows.append(f"scan_{k}.laz,{x:.3f},{y:.3f},{z:.3f},2.0,3.0")
     (tmp_path / "gnss.csv").write_text("\n".join(rows) + "\n")
-    scans = sorted(mixed.glob("*.laz"))
-    plain, coarse = tmp_path / "plain", tmp_path / "coarse"
-    assert runner.invoke(chain_app, [*map(str, scans), "-o", str(plain), "-q"]).exit_code == 0
+    coarse = tmp_path / "coarse"
     args = [*map(str, scans), "-o", str(coarse), "-q", "--control", str(tmp_path / "gnss.csv")]
     assert runner.invoke(chain_app, args).exit_code == 0
     assert len(_link_files(coarse)) <= len(_link_files(plain))

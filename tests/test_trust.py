@@ -92,7 +92,7 @@ def test_the_slices_alone_are_near_the_truth_before_icp(streets):
 
 
 def test_a_scan_of_another_street_in_the_middle_is_never_ok(tmp_path):
-    world = sim.StreetWorld(seed=41, grade=0.04, camber=0.025, tilt_deg=0.5)
+    world = sim.StreetWorld(seed=41, grade=0.04, camber=0.025, tilt_deg=0.5, n_scans=6)
     _, scans, truth = sim.scan_street(world)
     _, other, _ = sim.scan_street(sim.StreetWorld(seed=541, n_scans=1, grade=-0.03))
     mid = len(scans) // 2
