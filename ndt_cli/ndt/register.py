@@ -59,7 +59,9 @@ from ndt_cli.ndt.visibility import free_space_share, margin, scanner_inside
 class _Start:
     """Candidate poses (reduced frames), the search's level records, the refinement schedule,
     whether each of its levels restarts from the offsets, and how many of the candidates the
-    global search gave (0: none)."""
+    global search gave (0: none). After an ambiguous global search, the start grid's own
+    candidates (``grid``) are refined through the grid's schedule (``grid_schedule``,
+    restarting at every level), apart from the global search's, which keep theirs."""
 
     candidates: np.ndarray
     levels: list[LevelStats]
@@ -67,6 +69,8 @@ class _Start:
     restarts: tuple[bool, ...]
     searched: int = 0
     guessed: np.ndarray | None = None  # the initial guess's planar pose (None: no guess)
+    grid: np.ndarray | None = None
+    grid_schedule: tuple[float, ...] = ()
 
 
 def _starts(
@@ -107,22 +111,22 @@ def _search(
     that level only), falling back to the start grid too when it is ambiguous or finds no
     overlap at all; or the grid."""
     cells, s = cfg.grid.cell_sizes, cfg.search
-    stages, candidates = [], []
-    if s.method == "bnb":
-        found = global_start(target, source, s, kernels, cfg.slices.heights)
-        stages.append(found.level)
-        candidates.append(found.candidates)
-        if len(found.candidates) and found.ratio < s.fallback_ratio:
-            schedule = tuple(c for c in cells if c <= s.bnb_start_cell) or (min(cells),)
-            flags = (s.refine_offsets,) + (False,) * (len(schedule) - 1)
-            return _Start(found.candidates, stages, schedule, flags, len(found.candidates))
+    schedule = cells[1:] if len(cells) > 1 else cells  # the start grid's
+    grid_flags = (s.refine_offsets,) * len(schedule)
+    if s.method != "bnb":
+        grid = start_search(target, source, maps, sampler, cells[0], s, cfg.optimizer, kernels)
+        return _Start(grid.candidates, [grid.level], schedule, grid_flags)
+    found = global_start(target, source, s, kernels, cfg.slices.heights)
+    bnb_schedule = tuple(c for c in cells if c <= s.bnb_start_cell) or (min(cells),)
+    flags = (s.refine_offsets,) + (False,) * (len(bnb_schedule) - 1)
+    start = _Start(found.candidates, [found.level], bnb_schedule, flags, len(found.candidates))
+    if len(found.candidates) and found.ratio < s.fallback_ratio:
+        return start
     grid = start_search(target, source, maps, sampler, cells[0], s, cfg.optimizer, kernels)
-    stages.append(grid.level)
-    candidates.append(grid.candidates)
-    schedule = cells[1:] if len(cells) > 1 else cells
-    searched = sum(len(c) for c in candidates[:-1])
-    return _Start(
-        np.vstack(candidates), stages, schedule, (s.refine_offsets,) * len(schedule), searched
+    if not len(found.candidates):  # no overlap found: the grid alone
+        return _Start(grid.candidates, [found.level, grid.level], schedule, grid_flags)
+    return replace(
+        start, levels=[found.level, grid.level], grid=grid.candidates, grid_schedule=schedule
     )
 
 
@@ -316,12 +320,16 @@ def register_prepared(
     sampler = SourceSampler(source.slices, cfg.source)
     start = _starts(target, source, maps, sampler, cfg, init, guess, kernels)
     schedule = with_verification(start.schedule)
-    restarts = start.restarts + (start.restarts[-1],) * (len(schedule) - len(start.restarts))
 
-    def run(candidates: np.ndarray) -> Refined:
-        return coarse_to_fine(candidates, schedule, maps, sampler, cfg.optimizer, restarts, kernels)
+    def run(candidates: np.ndarray, cells=start.schedule, restarts=start.restarts) -> Refined:
+        cells = with_verification(cells)
+        flags = restarts + (restarts[-1],) * (len(cells) - len(restarts))
+        return coarse_to_fine(candidates, cells, maps, sampler, cfg.optimizer, flags, kernels)
 
     refined = run(start.candidates)
+    if start.grid is not None:
+        flags = (cfg.search.refine_offsets,)
+        refined = refined.joined(run(start.grid, start.grid_schedule, flags))
     judged = _judged(_allowed(refined, schedule, start, init), target, source, cfg)
     depth = Deeper.SKIPPED if _doubtful(judged, start) else Deeper.NONE
     if depth is Deeper.SKIPPED and deeper:
