@@ -3,8 +3,8 @@
 1. **Start search** (no initial guess, :mod:`ndt_cli.ndt.search`): by default the exact global
    branch-and-bound search over (x, y, yaw) (:mod:`ndt_cli.ndt.bnb`), whose best distinct poses
    are the candidates; when its second pose scores nearly as well as its best, the grid of
-   Newton starts at the coarsest cell runs too and its candidates join (``search.method:
-   starts``: the grid alone). With a guess (:mod:`ndt_cli.ndt.guess`), its headings refined
+   Newton starts at the coarsest cell runs too and its candidates join, refined on the grid's
+   own schedule (``search.method: starts``: the grid alone). With a guess (:mod:`ndt_cli.ndt.guess`), its headings refined
    from a cell of twice its uncertainty and, when it is uncertain by more than a metre, the
    best poses of a local search within that uncertainty.
 2. **Coarse to fine** (:mod:`ndt_cli.ndt.coarse_to_fine`): every candidate refined through the
