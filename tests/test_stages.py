@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 from ndt_cli.config import Config, RefineConfig
 from ndt_cli.core.transforms import transform_errors
 from ndt_cli.ndt.backend import NUMBA, NUMPY
-from ndt_cli.ndt.coarse_to_fine import Refined, fit_weighted
+from ndt_cli.ndt.coarse_to_fine import fit_weighted
 from ndt_cli.ndt.kernels import MATCHED, NACC, SCORE
 from ndt_cli.ndt.prepare import load_and_prepare
 from ndt_cli.ndt.quality import weakest_direction
@@ -242,41 +242,6 @@ def test_fit_weighted_prefers_the_better_fit_over_more_matches():
     acc[1, SCORE], acc[1, MATCHED] = 55.0, 60.0  # fewer, fitting well
     w = fit_weighted(acc)
     assert w[1] == 1.0 and w[0] == pytest.approx((60.0**2 / 100) / (55.0**2 / 60))
-
-
-def _refined(weights):
-    weights = np.asarray(weights, float)
-    k = weights.shape[1]
-    return Refined(np.zeros((k, 3)), weights[-1], np.zeros(k), (), True, np.ones(k, bool), weights)
-
-
-def test_candidates_of_two_schedules_are_judged_on_the_evidence_levels_they_share():
-    """Three evidence levels (5, 2, 1 m) for two candidates, two (2, 1 m) for a third, from a
-    shorter schedule: each shared level's weights relative to that level's best, summed."""
-    joined = _refined([[9.0, 1.0], [4.0, 2.0], [2.0, 2.0]]).joined(_refined([[8.0], [1.0]]))
-    # 2 m: 4, 2, 8 over 8; 1 m: 2, 2, 1 over 2
-    np.testing.assert_allclose(joined.evidence, [0.5 + 1.0, 0.25 + 1.0, 1.0 + 0.5], rtol=1e-12)
-    assert joined.weights.shape == (2, 3) and len(joined.candidates) == 3
-
-
-@pytest.mark.slow
-def test_an_ambiguous_search_refines_its_poses_and_the_start_grid_s_on_their_own_schedules(
-    small_pair,
-):
-    """With the start grid run too (``fallback_ratio`` 0.5: the search's second pose scores
-    more than half its best here), the search's poses go through the cells from
-    ``bnb_start_cell`` (5 m) down, the grid's through the cells after its own first (10 m):
-    each with the 1 m verification level, and the pose found is right."""
-    scans, poses, cfg = small_pair
-    both = cfg.replace(search={"fallback_ratio": 0.5})
-    assert both.grid.cell_sizes == (10.0, 5.0, 2.0) and both.search.bnb_start_cell == 5.0
-    res = register(scans[0], scans[1], both)
-    cells = [level.cell_size for level in res.levels]
-    # the search at 1 m pixels, the grid at 10 m; then the search's poses, then the grid's
-    assert cells == [1.0, 10.0, 5.0, 2.0, 1.0, 5.0, 2.0, 1.0], cells
-    truth = np.linalg.inv(poses[0]) @ poses[1]
-    rot, trans = transform_errors(res.T_target_source, truth)
-    assert res.status is Status.OK and rot < 0.05 and trans < 0.02, (rot, trans)
 
 
 def test_weakest_direction_of_the_ndt_hessian():

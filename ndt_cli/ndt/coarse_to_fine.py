@@ -88,13 +88,9 @@ class Refined:
     weights: np.ndarray
 
     def joined(self, other: Refined) -> Refined:
-        """These candidates and ``other``'s, as if refined together: the evidence made
-        relative to the best of both at each level. Schedules that end alike (every schedule
-        is a tail of the configured cells, then :data:`VERIFY_CELLS`) may differ at their
-        start: the evidence levels they share are their last ones."""
-        n = min(len(self.weights), len(other.weights))
-        tails = [w[len(w) - n :] for w in (self.weights, other.weights)]
-        weights = np.concatenate(tails, axis=1)
+        """These candidates and ``other``'s, refined through the same schedule, as if refined
+        together: the evidence made relative to the best of both at each level."""
+        weights = np.concatenate([self.weights, other.weights], axis=1)
         scores = np.concatenate([self.scores, other.scores])
         each = np.concatenate([self.converged_each, other.converged_each])
         return Refined(

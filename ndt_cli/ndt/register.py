@@ -3,8 +3,8 @@
 1. **Start search** (no initial guess, :mod:`ndt_cli.ndt.search`): by default the exact global
    branch-and-bound search over (x, y, yaw) (:mod:`ndt_cli.ndt.bnb`), whose best distinct poses
    are the candidates; when its second pose scores nearly as well as its best, the grid of
-   Newton starts at the coarsest cell runs too and its candidates join, refined on the grid's
-   own schedule (``search.method: starts``: the grid alone). With a guess (:mod:`ndt_cli.ndt.guess`), its headings refined
+   Newton starts at the coarsest cell runs too and its candidates join (``search.method:
+   starts``: the grid alone). With a guess (:mod:`ndt_cli.ndt.guess`), its headings refined
    from a cell of twice its uncertainty and, when it is uncertain by more than a metre, the
    best poses of a local search within that uncertainty.
 2. **Coarse to fine** (:mod:`ndt_cli.ndt.coarse_to_fine`): every candidate refined through the
@@ -59,9 +59,7 @@ from ndt_cli.ndt.visibility import free_space_share, margin, scanner_inside
 class _Start:
     """Candidate poses (reduced frames), the search's level records, the refinement schedule,
     whether each of its levels restarts from the offsets, and how many of the candidates the
-    global search gave (0: none). After an ambiguous global search, the start grid's own
-    candidates (``grid``) are refined through the grid's schedule (``grid_schedule``,
-    restarting at every level), apart from the global search's, which keep theirs."""
+    global search gave (0: none)."""
 
     candidates: np.ndarray
     levels: list[LevelStats]
@@ -69,8 +67,6 @@ class _Start:
     restarts: tuple[bool, ...]
     searched: int = 0
     guessed: np.ndarray | None = None  # the initial guess's planar pose (None: no guess)
-    grid: np.ndarray | None = None
-    grid_schedule: tuple[float, ...] = ()
 
 
 def _starts(
@@ -111,22 +107,22 @@ def _search(
     that level only), falling back to the start grid too when it is ambiguous or finds no
     overlap at all; or the grid."""
     cells, s = cfg.grid.cell_sizes, cfg.search
-    schedule = cells[1:] if len(cells) > 1 else cells  # the start grid's
-    grid_flags = (s.refine_offsets,) * len(schedule)
-    if s.method != "bnb":
-        grid = start_search(target, source, maps, sampler, cells[0], s, cfg.optimizer, kernels)
-        return _Start(grid.candidates, [grid.level], schedule, grid_flags)
-    found = global_start(target, source, s, kernels, cfg.slices.heights)
-    bnb_schedule = tuple(c for c in cells if c <= s.bnb_start_cell) or (min(cells),)
-    flags = (s.refine_offsets,) + (False,) * (len(bnb_schedule) - 1)
-    start = _Start(found.candidates, [found.level], bnb_schedule, flags, len(found.candidates))
-    if len(found.candidates) and found.ratio < s.fallback_ratio:
-        return start
+    stages, candidates = [], []
+    if s.method == "bnb":
+        found = global_start(target, source, s, kernels, cfg.slices.heights)
+        stages.append(found.level)
+        candidates.append(found.candidates)
+        if len(found.candidates) and found.ratio < s.fallback_ratio:
+            schedule = tuple(c for c in cells if c <= s.bnb_start_cell) or (min(cells),)
+            flags = (s.refine_offsets,) + (False,) * (len(schedule) - 1)
+            return _Start(found.candidates, stages, schedule, flags, len(found.candidates))
     grid = start_search(target, source, maps, sampler, cells[0], s, cfg.optimizer, kernels)
-    if not len(found.candidates):  # no overlap found: the grid alone
-        return _Start(grid.candidates, [found.level, grid.level], schedule, grid_flags)
-    return replace(
-        start, levels=[found.level, grid.level], grid=grid.candidates, grid_schedule=schedule
+    stages.append(grid.level)
+    candidates.append(grid.candidates)
+    schedule = cells[1:] if len(cells) > 1 else cells
+    searched = sum(len(c) for c in candidates[:-1])
+    return _Start(
+        np.vstack(candidates), stages, schedule, (s.refine_offsets,) * len(schedule), searched
     )
 
 
@@ -320,16 +316,12 @@ def register_prepared(
     sampler = SourceSampler(source.slices, cfg.source)
     start = _starts(target, source, maps, sampler, cfg, init, guess, kernels)
     schedule = with_verification(start.schedule)
+    restarts = start.restarts + (start.restarts[-1],) * (len(schedule) - len(start.restarts))
 
-    def run(candidates: np.ndarray, cells=start.schedule, restarts=start.restarts) -> Refined:
-        cells = with_verification(cells)
-        flags = restarts + (restarts[-1],) * (len(cells) - len(restarts))
-        return coarse_to_fine(candidates, cells, maps, sampler, cfg.optimizer, flags, kernels)
+    def run(candidates: np.ndarray) -> Refined:
+        return coarse_to_fine(candidates, schedule, maps, sampler, cfg.optimizer, restarts, kernels)
 
     refined = run(start.candidates)
-    if start.grid is not None:
-        flags = (cfg.search.refine_offsets,)
-        refined = refined.joined(run(start.grid, start.grid_schedule, flags))
     judged = _judged(_allowed(refined, schedule, start, init), target, source, cfg)
     depth = Deeper.SKIPPED if _doubtful(judged, start) else Deeper.NONE
     if depth is Deeper.SKIPPED and deeper:
