@@ -50,7 +50,7 @@ def test_translation_profile_peaks_at_zero(pair):
 @pytest.mark.slow
 def test_basin_multi_slice_succeeds_at_least_as_often_as_one_slice(pair):
     cfg, p, _, _ = pair
-    offsets = analyze.basin_offsets(12.0, 6.0, 20.0, 20.0)
+    offsets = analyze.basin_offsets(12.0, 12.0, 20.0, 10.0)  # 45 starts: 0-17 m, 0-20 deg off
     rows = analyze.basin(p, cfg, offsets, jobs=2)
     assert len(rows) == 3 * len(offsets)
     rate = {
