@@ -1,6 +1,6 @@
 """Coarse matches of many pairs on a campaign's workers, and the partners they rank. The
-matches computed by the workers are compared with those computed here, one by one; the ranking
-with scores made up for the test."""
+matches computed by the workers (or here, for a batch whose worker was lost) are compared with
+those computed here, one by one; the ranking with scores made up for the test."""
 
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ from ndt_cli.ndt.overlap import coarse_match, sketch
 from ndt_cli.ndt.prepare import prepare
 from ndt_cli.pipeline.coarse import BATCH_PAIRS, match_pairs, partners
 from ndt_cli.pipeline.local_pool import WorkerPool
+from ndt_cli.pipeline.workers import Failure
 
 
 @pytest.fixture(scope="module")
@@ -33,6 +34,30 @@ def test_the_workers_give_every_pair_the_match_computed_here(sketches):
         pool.close()
     assert sorted(found) == pairs
     for a, b in pairs:
+        here = coarse_match(sketches[a], sketches[b])
+        assert found[(a, b)].score == here.score, (a, b)
+        assert np.array_equal(found[(a, b)].T_target_source, here.T_target_source), (a, b)
+
+
+class _LosesBatch:
+    """An executor whose worker is lost on one batch: that batch's value is a failure, the
+    others are computed (in this process)."""
+
+    ships_data = True
+
+    def __init__(self, lost: int) -> None:
+        self.lost = lost
+
+    def run(self, tasks, then=None):
+        for key, task in tasks.items():
+            yield key, (Failure("worker error: lost") if key == self.lost else task())
+
+
+def test_a_batch_whose_worker_was_lost_is_computed_here(sketches):
+    pairs = [(a, b) for a in sketches for b in sketches if a < b]
+    found = match_pairs(_LosesBatch(lost=1), sketches, pairs)
+    assert sorted(found) == pairs  # the lost batch's pairs too, none twice or missing
+    for a, b in pairs[BATCH_PAIRS : 2 * BATCH_PAIRS]:  # the second batch: the one lost
         here = coarse_match(sketches[a], sketches[b])
         assert found[(a, b)].score == here.score, (a, b)
         assert np.array_equal(found[(a, b)].T_target_source, here.T_target_source), (a, b)
