@@ -4,11 +4,12 @@ expected choice worked out from them."""
 from __future__ import annotations
 
 from dataclasses import replace
+from itertools import combinations
 
 import numpy as np
 
 from ndt_cli.pipeline.graph import CHI2_6_999, Edge
-from ndt_cli.pipeline.hypotheses import Hypothesis, choose
+from ndt_cli.pipeline.hypotheses import Hypothesis, choose, triangles
 
 COV = np.diag([1e-6] * 3 + [1e-4] * 3)  # 0.06 deg, 1 cm
 
@@ -158,3 +159,18 @@ def test_a_link_without_rivals_and_determined_everywhere_is_one_a_cycle_can_chec
     assert not firm(_registered(Status.SUSPECT, rivals=(rival,)))
     assert not firm(_registered(Status.SUSPECT, refuted=True))
     assert not firm(_registered(Status.FAILED))
+
+
+def test_the_triangles_of_a_graph_are_those_of_every_triple_in_the_same_order():
+    """Against the brute force over every triple of groups, on random graphs sparse and dense
+    (with links within one group, which close nothing)."""
+    rng = np.random.default_rng(5)
+    for n, density in ((12, 0.15), (20, 0.4), (9, 1.0), (30, 0.05)):
+        pairs = {(a, b) for a in range(n) for b in range(a, n) if rng.random() < density}
+        brute = [
+            t
+            for t in combinations(range(n), 3)
+            if {(t[0], t[1]), (t[1], t[2]), (t[0], t[2])} <= pairs
+        ]
+        assert list(triangles(pairs)) == brute, (n, density)
+    assert list(triangles([(0, 1), (1, 2)])) == []

@@ -278,7 +278,8 @@ def _network(
     chosen = sorted(k for k, c in choices.items() if c.chosen is not None)
     if chosen:
         used = [k for k in firm_ids if k not in loose] + chosen
-        edges = [_edge(links[k]) if k in firm_ids else choices[k].chosen.edge for k in used]
+        firm_set = set(firm_ids)
+        edges = [_edge(links[k]) if k in firm_set else choices[k].chosen.edge for k in used]
         v = verify(n_scans, anchor, edges, trust_bridges=trust_bridges)
     else:
         used = firm_ids
