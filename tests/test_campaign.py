@@ -213,7 +213,7 @@ def test_two_campaigns_in_one_call_keep_apart(tmp_path):
 
 @pytest.mark.slow
 def test_a_junction_side_streets_and_a_loop_are_all_ok_without_pairs(tmp_path):
-    loop = sim.block_loop(seed=0)
+    loop = sim.block_loop(seed=0, spacing=20.0)  # 21 standpoints round the block
     files = _write(tmp_path / "scans", loop)
     result = run_chain(files, Config(), tmp_path / "out", jobs=2)
     inv0 = np.linalg.inv(loop.poses[0])
