@@ -319,7 +319,8 @@ class Campaign:
     def _bridge(self, new: list[int]) -> None:
         """Join the groups of placed scans where they overlap: for each group but the
         largest, its :data:`BRIDGES` best coarse matches (pairs with a new scan, not tried
-        yet) with scans of other groups are registered, pairs near by known positions first;
+        yet, or tried one way round while placing and marginal: the other way round may pass)
+        with scans of other groups are registered, pairs near by known positions first;
         an ok one joins the two groups. The pairs ranked: the group's edge
         (:func:`~ndt_cli.pipeline.placement.edge`), its neighbours in campaign order and by
         known positions. A round
@@ -346,7 +347,7 @@ class Campaign:
                     for p in sorted(edge | near | hinted)
                     if not set(p) <= mine
                     and (p[0] in fresh or p[1] in fresh)
-                    and p not in self.links
+                    and (p not in self.links or self.tasks.may_turn(p))
                 ]
                 cross.sort(key=lambda p: (p not in near, -self._match(*p).score, p))
                 pairs += [p for p in cross[:BRIDGES] if p not in pairs]

@@ -71,6 +71,7 @@ class LinkRunner:
         self.tried: list[Link] = []  # every finished registration, the better way round or not
         self.finished: set[str] = set()  # keys of the links registered (or taken) so far
         self.reused: set[str] = set()  # keys of the links taken from the store
+        self.turned: set[Pair] = set()  # pairs registered the other way round too
 
     def scan_key(self, i: int) -> str:
         """The key of scan ``i``'s summary in the store."""
@@ -101,15 +102,21 @@ class LinkRunner:
         self.register_jobs([self._job(k) for k in fresh])
         if classic or not both_ways:
             return
-        marginal = (Status.SUSPECT, Status.DEGENERATE)
-        again = [k for k in planned if k.kind is LinkKind.FOUND and k.pair in self.links]
-        again = [k for k in again if self.links[k.pair].status in marginal]
+        again = [k for k in planned if k.kind is LinkKind.FOUND and self.may_turn(k.pair)]
+        self.turned |= {k.pair for k in again}
         self.register_jobs(
             [
                 self._job(PlannedLink(k.source, k.target, k.kind, turned_round(k.guess), k.deep))
                 for k in again
             ]
         )
+
+    def may_turn(self, pair: Pair) -> bool:
+        """Whether the pair's link is marginal (suspect or degenerate) and was registered one
+        way round only: the other way round may pass the gate."""
+        link = self.links.get(pair)
+        marginal = link is not None and link.status in (Status.SUSPECT, Status.DEGENERATE)
+        return marginal and pair not in self.turned
 
     def register_anew(self, planned: Sequence[PlannedLink]) -> None:
         """Register planned links even when their pair was registered already: with what they
