@@ -161,24 +161,31 @@ def test_ndt_chain_places_the_scan_from_approximate_poses(tmp_path, day):
 # Which scan is the target of the link between the last two scans here follows their files'
 # bytes, which hold the day: from the first day's files it is scan_2, and that way round the
 # registration is degenerate; the other way round (the second day's) it passes.
+DAYS = [datetime.date(2026, 11, 29), datetime.date(2026, 11, 28)]
+
+
+def _apart(folder: Path, day: datetime.date) -> tuple[list[Path], list[np.ndarray]]:
+    """Three scans of a busy street 40-50 m apart, written with ``day`` in their headers."""
+    world = StreetWorld(seed=42, **{**BUSY, "n_scans": 3, "spacing": (40, 50)})
+    _, scans, poses = scan_street(world)
+    files = [folder / f"scan_{k}.laz" for k in range(3)]
+    for path, points in zip(files, scans, strict=True):
+        write(path, points)
+        las = laspy.read(path)
+        las.header.creation_date = day
+        las.write(path)
+    return files, poses
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("day", [datetime.date(2026, 11, 29), datetime.date(2026, 11, 28)])
+@pytest.mark.parametrize("day", DAYS)
 def test_control_stations_place_the_scans_no_link_ties_to_the_anchor(tmp_path, day):
     """Three scans 40-50 m apart: the first one's links to the others fail, so those two are ok
     only in a cluster of their own, whichever of them is their link's target (a link tried
     while placing and marginal is tried the other way round). With a station on each (2 cm,
     as GNSS on the scanners gives), the first one is registered from where its station puts
     it: every scan ok in the control's frame, at the truth."""
-    world = StreetWorld(seed=42, **{**BUSY, "n_scans": 3, "spacing": (40, 50)})
-    _, scans, poses = scan_street(world)
-    files = [tmp_path / f"scan_{k}.laz" for k in range(3)]
-    for path, points in zip(files, scans, strict=True):
-        write(path, points)
-        las = laspy.read(path)
-        las.header.creation_date = day
-        las.write(path)
+    files, poses = _apart(tmp_path, day)
     offset = np.array([500_000.0, 5_400_000.0, 100.0])
     rows = ["scan,x,y,z,sigma_xy,sigma_z"]
     for path, T in zip(files, poses, strict=True):
@@ -201,3 +208,20 @@ def test_control_stations_place_the_scans_no_link_ties_to_the_anchor(tmp_path, d
             rot, trans = _errors(_pose(row), truth)
             assert row["status"] == "ok" and row["cluster"] == "0", row
             assert rot < ROT_DEG and trans < TRANS_M, (row["file"], rot, trans)
+
+
+@pytest.mark.slow
+def test_where_no_bridge_is_trusted_a_probe_is_not_registered_the_other_way_round(tmp_path):
+    """Indoors (``quality.trust_bridges`` false) a link on no cycle ties no scan in alone, so
+    groups are bridged without registering a marginal probe the other way round: the last two
+    scans of the first day's files above stay registered one way, and neither is ok."""
+    files, _ = _apart(tmp_path, DAYS[0])
+    config, out = tmp_path / "no_bridges.yaml", tmp_path / "out"
+    config.write_text("quality:\n  trust_bridges: false\n")
+    run = _run("chain_app", *map(str, files), "-o", str(out), "-j", "2", "-q", "-c", str(config))
+    assert run.returncode == 1, run.stderr
+    rows = list(csv.DictReader((out / "pairs.csv").open()))
+    last = [r for r in rows if {r["target"], r["source"]} == {"scan_1.laz", "scan_2.laz"}]
+    assert [(r["target"], r["status"]) for r in last] == [("scan_2.laz", "degenerate")]
+    found = list(csv.DictReader((out / "poses.csv").open()))
+    assert [r["status"] for r in found] == ["ok", "unposed", "unposed"]

@@ -168,7 +168,7 @@ class Campaign:
             matched(self.net.stations, names),
             self.net.grid_scale,
             self.cfg.quality.max_ambiguity,
-            self.cfg.quality.trust_bridges and self.walked,
+            self.trusts_bridges,
         )
         log_unused_controls(solution.datum)
         return ChainResult(
@@ -186,6 +186,11 @@ class Campaign:
             tried=tried_links(self.tasks.tried, links, {k.pair for k in self.net.pairs}),
             samples={i: s.sample for i, s in sorted(self.summaries.items()) if s.sample},
         )
+
+    @property
+    def trusts_bridges(self) -> bool:
+        """Whether a link on no cycle may tie a scan in (``quality.trust_bridges``, walked)."""
+        return self.cfg.quality.trust_bridges and self.walked
 
     def _anchor(self, names: Sequence[str]) -> int:
         """The scan whose frame is the world: the anchor asked for, or, when that one could
@@ -319,17 +324,19 @@ class Campaign:
     def _bridge(self, new: list[int]) -> None:
         """Join the groups of placed scans where they overlap: for each group but the
         largest, its :data:`BRIDGES` best coarse matches (pairs with a new scan, not tried
-        yet, or tried one way round while placing and marginal: the other way round may pass)
+        yet; where a bridge is trusted, also those tried one way round while placing and
+        marginal, since the other way round may pass: where none is, such a link ties no scan
+        in alone, and indoors the extra registrations swayed the joint choice among rivals)
         with scans of other groups are registered, pairs near by known positions first;
         an ok one joins the two groups. The pairs ranked: the group's edge
         (:func:`~ndt_cli.pipeline.placement.edge`), its neighbours in campaign order and by
-        known positions. A round
-        without a join is followed by up to :data:`BRIDGE_ROUNDS` - 1 more for the groups of
-        several scans (a piece of the campaign, placed out of order, whose best coarse matches
-        missed), not for a lone scan (a scan that fits nowhere stays alone); after a join,
-        every group has a round again."""
+        known positions. A round without a join is followed by up to :data:`BRIDGE_ROUNDS` - 1
+        more for the groups of several scans (a piece of the campaign, placed out of order,
+        whose best coarse matches missed), not for a lone scan (a scan that fits nowhere stays
+        alone); after a join, every group has a round again."""
         fresh = set(new)
         failed = 0
+        turn = self.trusts_bridges
         while failed < BRIDGE_ROUNDS:
             groups = placement.groups(self.where)
             pairs: list[Pair] = []
@@ -347,7 +354,7 @@ class Campaign:
                     for p in sorted(edge | near | hinted)
                     if not set(p) <= mine
                     and (p[0] in fresh or p[1] in fresh)
-                    and (p not in self.links or self.tasks.may_turn(p))
+                    and (p not in self.links or (turn and self.tasks.may_turn(p)))
                 ]
                 cross.sort(key=lambda p: (p not in near, -self._match(*p).score, p))
                 pairs += [p for p in cross[:BRIDGES] if p not in pairs]
