@@ -109,8 +109,9 @@ print(start_method())
 
 
 def test_workers_are_forked_only_from_a_parent_with_one_thread(sequence):
-    """Fork from a fresh process with Numba imported; spawn while another thread runs, and
-    once a thread pool (here the LAZ decoder's) has run: a forked child could wait forever."""
+    """Fork from a fresh process with Numba imported; from a fork server while another thread
+    runs, and once a thread pool (here the LAZ decoder's) has run: a child forked from such a
+    parent could wait forever."""
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
     out = subprocess.run(
         [sys.executable, "-c", START_METHOD, str(sequence[0][0])],
@@ -119,26 +120,26 @@ def test_workers_are_forked_only_from_a_parent_with_one_thread(sequence):
         check=True,
         env=env,
     ).stdout.split()
-    assert out == ["fork", "spawn", "fork", "spawn"]
+    assert out == ["fork", "forkserver", "fork", "forkserver"]
 
 
 @pytest.mark.slow
-def test_forked_and_spawned_workers_give_the_same_network(sequence, tmp_path):
-    """The command forks its workers; a process whose Numba threads ran spawns them. The
-    outputs are the same."""
+def test_workers_forked_by_the_command_or_a_fork_server_give_the_same_network(sequence, tmp_path):
+    """The command forks its workers; a process whose Numba threads ran has a fork server fork
+    them. The outputs are the same."""
     import numba
 
     from ndt_cli.pipeline.local_pool import start_method
 
     files, _ = sequence
     numba.njit(parallel=True)(lambda a: a.sum())(np.ones(4))  # Numba's threads run here
-    assert start_method() == "spawn"
-    assert run(files, tmp_path / "spawned", "--jobs", "2").exit_code == 0
+    assert start_method() == "forkserver"
+    assert run(files, tmp_path / "served", "--jobs", "2").exit_code == 0
     cmd = [*CHAIN, *map(str, files), "--out", str(tmp_path / "forked"), "--jobs", "2"]
     forked = subprocess.run([*cmd, "--verbose"], capture_output=True, text=True)
     assert forked.returncode == 0, forked.stderr
     assert "worker process(es) by fork" in forked.stderr
-    assert outputs(tmp_path / "spawned") == outputs(tmp_path / "forked")
+    assert outputs(tmp_path / "served") == outputs(tmp_path / "forked")
 
 
 @pytest.mark.slow

@@ -75,6 +75,16 @@ def _gone(pids: list[int], limit: float = 20.0) -> bool:
     return False
 
 
+def _assert_gone(pids: list[int]) -> None:
+    """Every one of ``pids`` ends (those left are killed, and the test fails)."""
+    try:
+        assert _gone(pids), "processes outlived the command"
+    finally:
+        for pid in pids:
+            if _alive(pid):
+                os.kill(pid, signal.SIGKILL)
+
+
 def _ended(proc: subprocess.Popen, log: Path) -> int:
     """The exit code; a command that does not end is killed, with its group, and fails."""
     try:
@@ -166,9 +176,43 @@ def test_workers_never_outlive_the_main_process(command, sig, street, tmp_path):
     time.sleep(1.0)
     proc.send_signal(sig)
     _ended(proc, log)
-    try:
-        assert _gone(workers), "worker processes outlived the command"
-    finally:
-        for pid in workers:
-            if _alive(pid):
-                os.kill(pid, signal.SIGKILL)
+    _assert_gone(workers)
+
+
+LIBRARY = """
+import sys, numba, numpy as np
+from ndt_cli.config import Config
+from ndt_cli.pipeline.chain import run_chain
+numba.njit(parallel=True)(lambda a: a.sum())(np.ones(4))  # its workers come from a fork server
+run_chain(sys.argv[2:], Config(), sys.argv[1], jobs=2)
+"""
+
+
+def _descendants(pid: int) -> list[int]:
+    """Every process below ``pid`` (a fork server and the workers it forked)."""
+    found, todo = [], [pid]
+    while todo:
+        children = _workers(todo.pop())
+        found += children
+        todo += children
+    return found
+
+
+@pytest.mark.parametrize("group", [False, True])
+def test_a_fork_servers_workers_never_outlive_the_program(group, street, tmp_path):
+    """A program whose Numba threads ran has its workers forked by a fork server. SIGKILL to
+    the program, or SIGTERM to its process group: the server and the workers end too."""
+    log = tmp_path / "log"
+    cmd = [sys.executable, "-c", LIBRARY, str(tmp_path / "o"), *map(str, street)]
+    proc = _start(cmd, log)
+    deadline = time.monotonic() + HANG
+    while len(below := _descendants(proc.pid)) < 3 and time.monotonic() < deadline:
+        time.sleep(0.05)  # the server, its two workers (and its resource tracker)
+    assert len(below) >= 3, log.read_text()
+    time.sleep(1.0)
+    if group:
+        os.killpg(proc.pid, signal.SIGTERM)
+    else:
+        proc.kill()
+    _ended(proc, log)
+    _assert_gone(below)

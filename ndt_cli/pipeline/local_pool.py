@@ -33,10 +33,11 @@ _busy: Counter | None = None  # in a worker: the pool's count of workers running
 _PR_SET_PDEATHSIG = 1  # prctl option: the signal this process gets when its parent dies
 _abandoned = threading.Event()  # set once workers were killed instead of being waited for
 CLOSE_WAIT_S = 30.0  # s the workers get to finish the tasks they hold when the pool closes
+FORK_SERVER_MODULE = "ndt_cli.pipeline.fork_server"  # imported once by the fork server
 
 
 def _init_worker(
-    parent: int, threads: int | None, busy: Counter | None, init: Callable[[], None] | None
+    parent: int | None, threads: int | None, busy: Counter | None, init: Callable[[], None] | None
 ) -> None:
     global _busy
     # Ctrl-C and SIGTERM (to the process group) are handled by the parent, which lets the
@@ -55,19 +56,36 @@ def _init_worker(
         init()
 
 
-def _die_with(parent: int) -> None:
+def _die_with(parent: int | None) -> None:
     """Have this worker killed when its parent process ends, however it ends (SIGKILL, the
     OOM killer): a worker never outlives the command that started it. Linux only. The kernel
     watches the parent's thread that started the worker: pools are driven from the main
-    thread (a pool started from a thread that ends before it would lose its workers)."""
+    thread (a pool started from a thread that ends before it would lose its workers).
+
+    A fork server is the parent of its workers, and ends when the last process that holds its
+    pipe does: the command and, by default, every worker it forked. A worker lets go of that
+    pipe, so that the server ends with the command and its workers with it."""
     if sys.platform != "linux":
         return
     try:
         ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
     except (OSError, AttributeError):
         return
-    if os.getppid() != parent:  # the parent died before the request took effect
+    if parent is not None and os.getppid() != parent:  # it died before the request took effect
         os._exit(1)
+    _let_go_of_server()
+
+
+def _let_go_of_server() -> None:
+    """Close this worker's copy of the pipe that keeps the fork server alive, if it has one
+    (forked by the server, or forked by a command that had started one)."""
+    from multiprocessing import forkserver
+
+    server = getattr(forkserver, "_forkserver", None)
+    fd = getattr(server, "_forkserver_alive_fd", None)
+    if fd is not None:
+        os.close(fd)
+        server._forkserver_alive_fd = None
 
 
 def _counted(task: Task) -> Any:
@@ -84,35 +102,56 @@ def _counted(task: Task) -> Any:
 
 
 def start_method() -> str:
-    """How worker processes start: ``fork`` where it is safe, else ``spawn``.
+    """How worker processes start: ``fork`` where it is safe, else from a fork server
+    (``forkserver``); ``spawn`` off Linux.
 
     A forked worker inherits the modules its parent imported (numpy, Numba, the package: about
-    a second of start-up per worker saved). Forking is safe only from a process that has one
-    thread: a thread pool that ran in the parent (the kernels' threads, the LAZ decoder's
-    threads, BLAS threads) exists in the child without its threads, and the child's first
-    parallel call waits for them forever. Linux only (macOS system libraries are not
-    fork-safe).
+    a second of start-up and two of CPU per worker saved). Forking is safe only from a process
+    that has one thread: a thread pool that ran in the parent (the kernels' threads, the LAZ
+    decoder's threads, BLAS threads) exists in the child without its threads, and the child's
+    first parallel call waits for them forever. A process that ran threads (a second chain in
+    one program, a test suite) forks its workers from a fork server instead: a process it
+    starts once, which has one thread, imported what workers need
+    (:mod:`ndt_cli.pipeline.fork_server`) and forks each worker in milliseconds. Off Linux
+    workers are spawned (macOS system libraries are not fork-safe).
     """
-    if sys.platform != "linux" or threading.active_count() > 1:
+    if sys.platform != "linux":
         return "spawn"
+    return "fork" if _one_thread() else "forkserver"
+
+
+def _one_thread() -> bool:
+    """Whether this process has one thread and never ran a thread pool of Numba's."""
+    if threading.active_count() > 1:
+        return False
     numba = sys.modules.get("numba")
     if numba is not None:
         try:
             numba.threading_layer()  # raises ValueError until a parallel kernel has run
-            return "spawn"
+            return False
         except ValueError:
             pass
     try:
-        threads = len(os.listdir("/proc/self/task"))
+        return len(os.listdir("/proc/self/task")) == 1
     except OSError:
-        return "spawn"
-    return "fork" if threads == 1 else "spawn"
+        return False
+
+
+def _fork_server() -> int | None:
+    """Start the fork server (once per process) and return its process id (None where the
+    standard library does not tell it): the workers' parent."""
+    from multiprocessing import forkserver
+
+    multiprocessing.set_forkserver_preload([FORK_SERVER_MODULE])
+    forkserver.ensure_running()
+    return getattr(getattr(forkserver, "_forkserver", None), "_forkserver_pid", None)
 
 
 class WorkerPool:
     """Worker processes that survive a worker dying.
 
-    Workers are forked where that is safe (:func:`start_method`), else spawned. When a worker
+    Workers are forked where that is safe, else forked by a fork server (:func:`start_method`).
+    When a worker
     dies (killed, out of memory, a crash in a library), every task in flight fails with
     BrokenProcessPool; those tasks are then rerun one at a time in a fresh single-worker pool,
     so only the task that kills its worker fails. ``init`` runs once in every worker process
@@ -135,12 +174,13 @@ class WorkerPool:
         method = start_method()
         log.debug("starting %d worker process(es) by %s", workers, method)
         context = multiprocessing.get_context(method)
+        parent = _fork_server() if method == "forkserver" else os.getpid()
         busy = context.Value("i", 0) if self.threads is None else None
         self._pool = ProcessPoolExecutor(
             max_workers=workers,
             mp_context=context,
             initializer=_init_worker,
-            initargs=(os.getpid(), self.threads, busy, self._init),
+            initargs=(parent, self.threads, busy, self._init),
         )
         return self._pool
 
