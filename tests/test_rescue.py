@@ -135,9 +135,7 @@ def test_ndt_chain_places_the_scan_from_approximate_poses(tmp_path, day):
     """Scans 39 m apart: the search's candidates near the truth end 2.9 m from it."""
     files, poses, ref = _pair(tmp_path, 15, 0, 1)
     for path in files:  # the files' bytes fixed (above)
-        las = laspy.read(path)
-        las.header.creation_date = day
-        las.write(path)
+        _dated(path, day)
     rng = np.random.default_rng(1)
     lines = []
     for path, T in zip(files, poses, strict=True):
@@ -171,10 +169,16 @@ def _apart(folder: Path, day: datetime.date) -> tuple[list[Path], list[np.ndarra
     files = [folder / f"scan_{k}.laz" for k in range(3)]
     for path, points in zip(files, scans, strict=True):
         write(path, points)
-        las = laspy.read(path)
-        las.header.creation_date = day
-        las.write(path)
+        _dated(path, day)
     return files, poses
+
+
+def _dated(path: Path, day: datetime.date) -> None:
+    """The LAS or LAZ file at ``path`` rewritten with ``day`` in its header (the file's bytes,
+    and so which scan of a link is its target, follow the day a file is written)."""
+    las = laspy.read(path)
+    las.header.creation_date = day
+    las.write(path)
 
 
 @pytest.mark.slow
