@@ -148,3 +148,43 @@ def test_a_pool_given_threads_keeps_them_whatever_runs_beside():
     finally:
         pool.close()
     assert alone == {"alone": 1}
+
+
+def test_a_process_whose_fork_server_cannot_start_spawns_its_workers(monkeypatch):
+    """No socket for a fork server (no temporary folder can hold one): the workers are
+    spawned, children of this process, and run their tasks."""
+    import multiprocessing.forkserver
+
+    from ndt_cli.pipeline import local_pool
+
+    def no_socket() -> None:
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(local_pool, "start_method", lambda: "forkserver")
+    monkeypatch.setattr(multiprocessing.forkserver, "ensure_running", no_socket)
+    pool = WorkerPool(2, threads=1)
+    try:
+        parents = dict(pool.run({k: os.getppid for k in range(2)}))
+    finally:
+        pool.close()
+    assert parents == {0: os.getpid(), 1: os.getpid()}
+
+
+def test_a_fork_servers_workers_are_its_children_not_this_process():
+    """From a process that ran threads, the workers are forked by the fork server."""
+    from ndt_cli.pipeline.local_pool import start_method
+
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:
+        assert start_method() == "forkserver"
+        pool = WorkerPool(2, threads=1)
+        try:
+            parents = set(dict(pool.run({k: os.getppid for k in range(2)})).values())
+        finally:
+            pool.close()
+    finally:
+        stop.set()
+        other.join()
+    assert len(parents) == 1 and os.getpid() not in parents

@@ -137,14 +137,19 @@ def _one_thread() -> bool:
         return False
 
 
-def _fork_server() -> int | None:
-    """Start the fork server (once per process) and return its process id (None where the
-    standard library does not tell it): the workers' parent."""
+def _fork_server() -> tuple[str, int | None]:
+    """Start the fork server (once per process): ``("forkserver", its process id)``, the
+    workers' parent (None where the standard library does not tell it); ``("spawn", this
+    process's id)`` when it cannot start (no socket can be made in any temporary folder)."""
     from multiprocessing import forkserver
 
     multiprocessing.set_forkserver_preload([FORK_SERVER_MODULE])
-    forkserver.ensure_running()
-    return getattr(getattr(forkserver, "_forkserver", None), "_forkserver_pid", None)
+    try:
+        forkserver.ensure_running()
+    except OSError as exc:
+        log.debug("no fork server (%s): workers are spawned", exc)
+        return "spawn", os.getpid()
+    return "forkserver", getattr(getattr(forkserver, "_forkserver", None), "_forkserver_pid", None)
 
 
 class WorkerPool:
@@ -171,10 +176,11 @@ class WorkerPool:
 
     def _new(self, workers: int) -> ProcessPoolExecutor:
         self.close()
-        method = start_method()
+        method, parent = start_method(), os.getpid()
+        if method == "forkserver":
+            method, parent = _fork_server()
         log.debug("starting %d worker process(es) by %s", workers, method)
         context = multiprocessing.get_context(method)
-        parent = _fork_server() if method == "forkserver" else os.getpid()
         busy = context.Value("i", 0) if self.threads is None else None
         self._pool = ProcessPoolExecutor(
             max_workers=workers,
