@@ -65,6 +65,7 @@ def _die_with(parent: int | None) -> None:
     A fork server is the parent of its workers, and ends when the last process that holds its
     pipe does: the command and, by default, every worker it forked. A worker lets go of that
     pipe, so that the server ends with the command and its workers with it."""
+    _let_go_of_server()
     if sys.platform != "linux":
         return
     try:
@@ -73,7 +74,6 @@ def _die_with(parent: int | None) -> None:
         return
     if parent is not None and os.getppid() != parent:  # it died before the request took effect
         os._exit(1)
-    _let_go_of_server()
 
 
 def _let_go_of_server() -> None:
@@ -156,12 +156,12 @@ class WorkerPool:
     """Worker processes that survive a worker dying.
 
     Workers are forked where that is safe, else forked by a fork server (:func:`start_method`).
-    When a worker
-    dies (killed, out of memory, a crash in a library), every task in flight fails with
-    BrokenProcessPool; those tasks are then rerun one at a time in a fresh single-worker pool,
-    so only the task that kills its worker fails. ``init`` runs once in every worker process
-    before its first task. Without ``threads``, the workers share the cores: each kernel call
-    of a task takes the cores over the number of workers running a task at that moment.
+    When a worker dies (killed, out of memory, a crash in a library), every task in flight
+    fails with BrokenProcessPool; those tasks are then rerun one at a time in a fresh
+    single-worker pool, so only the task that kills its worker fails. ``init`` runs once in
+    every worker process before its first task. Without ``threads``, the workers share the
+    cores: each kernel call of a task takes the cores over the number of workers running a task
+    at that moment.
     """
 
     ships_data = True
