@@ -4,6 +4,8 @@ soon as its two scans are ready, without waiting for the slowest scan."""
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import threading
 import time
 from concurrent.futures.process import _ExecutorManagerThread
@@ -188,3 +190,30 @@ def test_a_fork_servers_workers_are_its_children_not_this_process():
         stop.set()
         other.join()
     assert len(parents) == 1 and os.getpid() not in parents
+
+
+UNGUARDED = """
+import os, threading
+from ndt_cli.pipeline.local_pool import WorkerPool
+if __name__ == "__main__":  # in the program (not in a worker): a thread runs, no fork is safe
+    threading.Thread(target=threading.Event().wait, daemon=True).start()
+pool = WorkerPool(1, threads=1)
+print("RAN", os.getpid(), flush=True)
+print(dict(pool.run({0: os.getpid})), flush=True)
+pool.close()
+"""
+
+
+def test_a_script_without_the_main_guard_is_not_run_again_by_workers_of_its_workers(tmp_path):
+    """A worker of a program that could not fork imports the program's main module. Without the
+    ``if __name__ == "__main__":`` guard that runs the script again; it must not start workers
+    of its own there (forked, they would run it again, and so on), but fail as Python says."""
+    script = tmp_path / "unguarded.py"
+    script.write_text(UNGUARDED)
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    done = subprocess.run(
+        [sys.executable, str(script)], capture_output=True, text=True, env=env, timeout=120
+    )
+    assert done.stdout.count("RAN") == 2, done.stdout  # the program, and its worker's import
+    assert done.stdout.count("{0:") == 1, done.stdout  # only the program's pool ran its task
+    assert "if __name__ == '__main__'" in done.stderr, done.stderr[-2000:]

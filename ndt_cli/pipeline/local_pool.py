@@ -121,8 +121,11 @@ def start_method() -> str:
 
 
 def _one_thread() -> bool:
-    """Whether this process has one thread and never ran a thread pool of Numba's."""
-    if threading.active_count() > 1:
+    """Whether this process has one thread and never ran a thread pool of Numba's, and is not
+    a worker still importing its program's main module (a script without the ``if __name__ ==
+    "__main__":`` guard, run again in its workers: they must fail to start, with Python's
+    message, rather than fork workers that run it again)."""
+    if threading.active_count() > 1 or getattr(multiprocessing.current_process(), "_inheriting", 0):
         return False
     numba = sys.modules.get("numba")
     if numba is not None:
