@@ -11,6 +11,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -45,10 +46,13 @@ def _workers(pid: int) -> list[int]:
     return children
 
 
-def _wait_for_workers(proc: subprocess.Popen, n: int = 1) -> list[int]:
+def _wait_for_workers(
+    proc: subprocess.Popen, n: int = 1, find: Callable[[int], list[int]] = _workers
+) -> list[int]:
+    """The processes ``find`` sees below the command (its workers), once there are ``n``."""
     deadline = time.monotonic() + HANG
     while time.monotonic() < deadline and proc.poll() is None:
-        found = _workers(proc.pid)
+        found = find(proc.pid)
         if len(found) >= n:
             return found
         time.sleep(0.05)
@@ -205,10 +209,7 @@ def test_a_fork_servers_workers_never_outlive_the_program(group, street, tmp_pat
     log = tmp_path / "log"
     cmd = [sys.executable, "-c", LIBRARY, str(tmp_path / "o"), *map(str, street)]
     proc = _start(cmd, log)
-    deadline = time.monotonic() + HANG
-    while len(below := _descendants(proc.pid)) < 3 and time.monotonic() < deadline:
-        time.sleep(0.05)  # the server, its two workers (and its resource tracker)
-    assert len(below) >= 3, log.read_text()
+    below = _wait_for_workers(proc, 3, _descendants)  # the server, its two workers (a tracker)
     time.sleep(1.0)
     if group:
         os.killpg(proc.pid, signal.SIGTERM)
