@@ -15,7 +15,7 @@ import pytest
 from conftest import street_files
 from typer.testing import CliRunner
 
-from ndt_cli import io, sim
+from ndt_cli import sim
 from ndt_cli.cli import chain_app, export_app
 from ndt_cli.config import Config
 from ndt_cli.core.transforms import transform_errors
@@ -29,14 +29,6 @@ from ndt_cli.pipeline.verify import NodeStatus
 
 runner = CliRunner()
 ROT, TRANS = 0.3, 0.15  # deg, m: a pose within these of the truth is right
-
-
-def _write(folder: Path, survey: sim.Survey) -> list[Path]:
-    folder.mkdir(parents=True, exist_ok=True)
-    files = [folder / f"{name}.laz" for name in survey.names]
-    for f, pts in zip(files, survey.scans, strict=True):
-        io.write(f, pts)
-    return files
 
 
 def _right(T: np.ndarray | None, truth: np.ndarray) -> bool:
@@ -169,7 +161,7 @@ def test_coarse_positions_of_a_shuffled_street_choose_links_and_do_no_harm(
 @pytest.mark.slow
 def test_two_campaigns_in_one_call_keep_apart(tmp_path):
     both = sim.two_sites(seed=2, n_scans=(4, 3))
-    files = _write(tmp_path / "scans", both)
+    files = sim.write_survey(both, tmp_path / "scans")
     out = tmp_path / "out"
     res = runner.invoke(chain_app, [*map(str, files), "-o", str(out), "-q", "-j", "2"])
     assert res.exit_code == 1, res.output  # not every scan is ok in one frame
@@ -214,7 +206,7 @@ def test_two_campaigns_in_one_call_keep_apart(tmp_path):
 @pytest.mark.slow
 def test_a_junction_side_streets_and_a_loop_are_all_ok_without_pairs(tmp_path):
     loop = sim.block_loop(seed=0, spacing=20.0)  # 21 standpoints round the block
-    files = _write(tmp_path / "scans", loop)
+    files = sim.write_survey(loop, tmp_path / "scans")
     result = run_chain(files, Config(), tmp_path / "out", jobs=2)
     inv0 = np.linalg.inv(loop.poses[0])
     for k, s in enumerate(result.solution.scans):
@@ -267,9 +259,9 @@ def test_a_shuffled_route_is_placed_by_its_coarse_matches_with_the_same_poses(tm
     order = [
         next(j for j, P in enumerate(route.poses) if np.array_equal(P, Q)) for Q in mixed.poses
     ]
-    walk = run_chain(_write(tmp_path / "walk", route), Config(), tmp_path / "a", jobs=2)
+    walk = run_chain(sim.write_survey(route, tmp_path / "walk"), Config(), tmp_path / "a", jobs=2)
     with caplog.at_level("INFO", logger="ndt_cli.progress"):
-        files = _write(tmp_path / "mixed", mixed)
+        files = sim.write_survey(mixed, tmp_path / "mixed")
         # in the walk's folder: a pair both register is taken from its store (links are keyed
         # by the scans' content, and a registration gives the same link again)
         shuffled = run_chain(
@@ -298,3 +290,41 @@ def test_a_shuffled_route_is_placed_by_its_coarse_matches_with_the_same_poses(tm
         if b.status is NodeStatus.OK:  # the same network but the bridge: within a link's
             rot, trans = transform_errors(a.T_world_scan, b.T_world_scan)  # accuracy
             assert rot < 0.005 and trans < 0.005, (scan, rot, trans)
+
+
+@pytest.mark.slow
+def test_shuffled_files_that_say_when_they_were_taken_are_placed_as_walked(tmp_path, caplog):
+    """The scans of a route in random order, each file with its points' GPS times (as scanners
+    write them): the campaign follows their time order, which is the walk, so it registers
+    what the walk does and ends with the walk's statuses and poses, where files without times
+    are placed by coarse matches (the test above)."""
+    route = sim.route(seed=3, n_scans=10, rays=(1500, 200))
+    mixed = sim.shuffled(route, seed=2)
+    order = [
+        next(j for j, P in enumerate(route.poses) if np.array_equal(P, Q)) for Q in mixed.poses
+    ]
+    assert order != sorted(order)
+    walk_files = sim.write_survey(route, tmp_path / "walk", times=True)
+    walk = run_chain(walk_files, Config(), tmp_path / "a", jobs=2)
+    with caplog.at_level("INFO", logger="ndt_cli.progress"):
+        files = sim.write_survey(mixed, tmp_path / "mixed", times=True)
+        shuffled = run_chain(files, Config(), tmp_path / "b", jobs=2, anchor=order.index(0))
+    said = [r.getMessage() for r in caplog.records]
+    assert "the scans' acquisition times give the walk" in said
+    assert not any("no hint" in m for m in said)
+    names = [f"scan_{k:02d}" for k in order]  # the walk's name of each shuffled file
+
+    def pairs(result, name_of):  # each link's scans by their walk names, and its kind
+        return sorted(
+            (*sorted((name_of[k.target], name_of[k.source])), k.kind) for k in result.links
+        )
+
+    assert pairs(shuffled, names) == pairs(walk, [f"scan_{k:02d}" for k in range(len(order))])
+    assert len(shuffled.tried) == len(walk.tried)
+    inv0 = np.linalg.inv(route.poses[0])
+    for k, scan in enumerate(order):
+        a, b = walk.solution.scans[scan], shuffled.solution.scans[k]
+        assert a.status is b.status is NodeStatus.OK, (scan, a.reason, b.reason)
+        assert _right(b.T_world_scan, inv0 @ route.poses[scan]), scan
+        rot, trans = transform_errors(a.T_world_scan, b.T_world_scan)  # the same links, the
+        assert rot < 1e-4 and trans < 1e-5, (scan, rot, trans)  # scans numbered otherwise

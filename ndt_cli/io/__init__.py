@@ -9,6 +9,7 @@ from ndt_cli.io.blocks import Block
 from ndt_cli.io.points import (
     SUPPORTED_SUFFIXES,
     PointCloud,
+    acquired,
     as_points,
     count,
     read,
@@ -24,6 +25,7 @@ __all__ = [
     "WRITE_SUFFIXES",
     "Block",
     "PointCloud",
+    "acquired",
     "as_points",
     "count",
     "read",

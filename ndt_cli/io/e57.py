@@ -186,6 +186,20 @@ def header_pose(spec: str | Path) -> np.ndarray | None:
         e57.close()
 
 
+def acquisition_start(spec: str | Path) -> float | None:
+    """The scan header's ``acquisitionStart`` (GPS seconds), or None when it has none."""
+    path, index = split_spec(spec)
+    e57 = open_file(path)
+    try:
+        header = e57.get_header(which_scan(path, index, int(e57.scan_count), str(spec)))
+        try:
+            return float(header.acquisitionStart_dateTimeValue)
+        except Exception:  # libE57 raises when the optional element is missing
+            return None
+    finally:
+        e57.close()
+
+
 def write(path: str | Path, scans: list[np.ndarray], poses: list[np.ndarray | None]) -> None:
     """Write scans (each (N,3) in its own frame) with optional header poses (tests and tools)."""
     import pye57

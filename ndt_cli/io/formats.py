@@ -63,6 +63,11 @@ class PointReader:
         """Points the header announces, or None for formats without a header count."""
         return None
 
+    def acquired(self, spec: Path) -> float | None:
+        """When the scan was taken (GPS seconds as the file stores them), or None: the format
+        or the file keeps no time (:func:`ndt_cli.io.points.acquired`)."""
+        return None
+
     def check(self, path: Path) -> None:
         """Read what a quick look needs (the header) and raise if the file cannot be used."""
         self.count(path)
@@ -132,6 +137,15 @@ class LasReader(PointReader):
 
     def records(self, path: Path, chunk_points: int) -> Iterator[Chunk]:
         return record_io.las_chunks(path, chunk_points)
+
+    def acquired(self, spec: Path) -> float | None:
+        """The first point record's ``gps_time`` (point formats 1 and 3-10; a scanner writes
+        its records in the order it measured them)."""
+        with laspy.open(spec) as reader:
+            if "gps_time" not in reader.header.point_format.dimension_names:
+                return None
+            first = reader.read_points(1)
+        return float(first.gps_time[0]) if len(first) else None
 
     def count(self, path: Path) -> int:
         with laspy.open(path) as reader:
@@ -379,6 +393,11 @@ class E57Reader(PointReader):
         from ndt_cli.io import e57
 
         return e57.header_pose(spec)
+
+    def acquired(self, spec: Path) -> float | None:
+        from ndt_cli.io import e57
+
+        return e57.acquisition_start(spec)
 
     def summary(self, path: Path) -> Summary:
         return record_io.e57_summary(path)

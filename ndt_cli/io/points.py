@@ -190,6 +190,21 @@ def count(path: str | Path) -> int | None:
         return reader.count(p)
 
 
+def acquired(path: str | Path) -> float | None:
+    """When a scan was taken: GPS seconds of its first point record (LAS/LAZ ``gps_time``) or
+    its E57 header's ``acquisitionStart``; None for formats without times (PLY, PCD, PTX,
+    text), for a file that stores none (0 is what writers put when they have none), and for a
+    file that cannot be read (reading it fails later, with its reason). Seconds as the file
+    stores them: only their order is used (:attr:`ndt_cli.pipeline.campaign.Campaign.walk`)."""
+    try:
+        p, reader = checked_reader(path)
+        with file_errors(p):
+            t = reader.acquired(p)
+    except NdtError:
+        return None
+    return t if t is not None and np.isfinite(t) and t > 0 else None
+
+
 def record_count(path: str | Path) -> int | None:
     """Point records a file's header announces, invalid ones included (LAS/LAZ, E57), or None
     for formats without a count: an upper bound on its points, to budget memory."""

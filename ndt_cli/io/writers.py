@@ -41,12 +41,16 @@ def _las_offsets(points: np.ndarray, target: Path) -> np.ndarray:
     return offsets
 
 
-def _write_las(path: Path, points: np.ndarray, offsets: np.ndarray, compress: bool) -> None:
-    header = laspy.LasHeader(point_format=0, version="1.2")
+def _write_las(
+    path: Path, points: np.ndarray, offsets: np.ndarray, compress: bool, gps_time: np.ndarray | None
+) -> None:
+    header = laspy.LasHeader(point_format=0 if gps_time is None else 1, version="1.2")
     header.scales = np.full(3, LAS_SCALE)
     header.offsets = offsets
     las = laspy.LasData(header)
     las.x, las.y, las.z = points[:, 0], points[:, 1], points[:, 2]
+    if gps_time is not None:
+        las.gps_time = np.asarray(gps_time, dtype=np.float64)
     las.write(str(path), do_compress=compress)
 
 
@@ -67,10 +71,11 @@ def _write_text(path: Path, points: np.ndarray, sep: str) -> None:
             fh.write("".join(f"{x!r}{sep}{y!r}{sep}{z!r}\n" for x, y, z in block))
 
 
-def write(path: str | Path, points: np.ndarray) -> None:
+def write(path: str | Path, points: np.ndarray, gps_time: np.ndarray | None = None) -> None:
     """Write (N,3) points (metres, any frame) atomically; the format follows the extension.
 
-    .ply: binary little endian float64; .las/.laz: 1 mm scale, offsets from the data minimum;
+    .ply: binary little endian float64; .las/.laz: 1 mm scale, offsets from the data minimum,
+    point format 0, or 1 with ``gps_time`` ((N,) seconds, when each point was measured);
     .pcd: binary float64; .xyz/.txt: space separated, .csv: comma separated with an x,y,z
     header, full float64 precision. Raises :class:`OutputError` if the file cannot be written.
     """
@@ -84,12 +89,14 @@ def write(path: str | Path, points: np.ndarray) -> None:
             f"cannot write {suffix or '(no extension)'!r}; writable: {' '.join(WRITE_SUFFIXES)}",
             target,
         )
+    if gps_time is not None and (suffix not in (".las", ".laz") or len(gps_time) != len(pts)):
+        raise ValueError("times are written to LAS/LAZ only, one per point")
     offsets = _las_offsets(pts, target) if suffix in (".las", ".laz") else None
     with atomic_path(target) as tmp:
         if suffix == ".ply":
             _write_ply(tmp, pts)
         elif offsets is not None:
-            _write_las(tmp, pts, offsets, compress=suffix == ".laz")
+            _write_las(tmp, pts, offsets, suffix == ".laz", gps_time)
         elif suffix == ".pcd":
             _write_pcd(tmp, pts)
         else:

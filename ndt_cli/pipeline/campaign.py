@@ -2,11 +2,12 @@
 the network, and :meth:`Campaign.add_scans` updates them in named steps:
 
 1. **Admit**: each new scan is known by its content (file hash) and gets the next index in
-   campaign order (the order scans came in: a walk, when there is one).
+   campaign order (the order scans came in); the walk is their time order when every scan
+   says when it was taken, else that order (:mod:`ndt_cli.pipeline.walk`).
 2. **Summarise**: each new scan is read and prepared once (its sketch and preview are kept in
    the link store, so a campaign that resumes does not read it again).
 3. **Discover** (:mod:`ndt_cli.pipeline.discovery`): each new scan registered to its neighbours
-   in campaign order (a walk) or to its best coarse matches (scans out of order), and to the
+   along the walk or to its best coarse matches (scans out of order), and to the
    scans near it by known positions (control stations, however coarse), when given.
 4. **Consolidate**: place every scan again by all its links
    (:func:`~ndt_cli.pipeline.placement.replace_all`), plan the network from where the scans
@@ -33,6 +34,7 @@ from typing import Any
 import numpy as np
 from numpy.linalg import inv
 
+from ndt_cli import io
 from ndt_cli.config.loading import dump
 from ndt_cli.config.schema import Config
 from ndt_cli.errors import UserInterruptError, caused_by_interrupt
@@ -69,10 +71,16 @@ from ndt_cli.pipeline.network import (
 )
 from ndt_cli.pipeline.options import NetworkOptions
 from ndt_cli.pipeline.result import ChainResult, ScanReport, scan_report, tried_links
-from ndt_cli.pipeline.scans import UNREADABLE, DuplicateScanError, identity, scan_names
+from ndt_cli.pipeline.scans import (
+    UNREADABLE,
+    DuplicateScanError,
+    identity,
+    readable_anchor,
+    scan_names,
+)
 from ndt_cli.pipeline.solution import NetworkSolution, determined, solve
+from ndt_cli.pipeline.walk import Walk
 
-log = logging.getLogger(__name__)
 progress = logging.getLogger("ndt_cli.progress")
 
 ROUNDS = 3  # consolidation rounds: place, plan, register
@@ -130,7 +138,8 @@ class Campaign:
         self.by_station: set[Pair] = set()  # pairs registered from a station's position once
         self.plan: set[Pair] = set()
         self.where: dict[int, Placed] = {}  # where each placed scan is, roughly
-        self.walked = True  # the campaign order proved a hint (see :meth:`_discover`)
+        self.walk = Walk(by_time=not self.net.classic)  # the order the scans were taken in
+        self.walked = True  # the walk proved a hint (see :meth:`_discover`)
         self.radius = float("nan")
 
     # ------------------------------------------------------------------ the entry points
@@ -156,7 +165,7 @@ class Campaign:
         """Solve the planned network: a pose and a status per scan."""
         links = self._network()
         names = tuple(scan_names(self.paths))
-        anchor = self._anchor(names)
+        anchor = readable_anchor(self.anchor, self.unreadable, names)
         if self.net.adjust and links:
             progress.info("adjusting the network of %d link(s)", len(links))
         solution = solve(
@@ -183,7 +192,7 @@ class Campaign:
             radius=self.radius,
             hashes=tuple(None if h.startswith(UNREADABLE) else h for h in self.hashes),
             **self._world_system(solution),
-            tried=tried_links(self.tasks.tried, links, {k.pair for k in self.net.pairs}),
+            tried=tried_links(self.tasks.tried, links, self.net.given, self.walk.adjacent),
             samples={i: s.sample for i, s in sorted(self.summaries.items()) if s.sample},
         )
 
@@ -191,22 +200,6 @@ class Campaign:
     def trusts_bridges(self) -> bool:
         """Whether a link on no cycle may tie a scan in (``quality.trust_bridges``, walked)."""
         return self.cfg.quality.trust_bridges and self.walked
-
-    def _anchor(self, names: Sequence[str]) -> int:
-        """The scan whose frame is the world: the anchor asked for, or, when that one could
-        not be read, the first scan that could (an aborted copy never defines the world)."""
-        if self.anchor not in self.unreadable:
-            return self.anchor
-        readable = [i for i in range(len(self.paths)) if i not in self.unreadable]
-        if not readable:
-            return self.anchor
-        log.warning(
-            "the anchor %s could not be read (%s): the world is the frame of %s",
-            names[self.anchor],
-            self.unreadable[self.anchor],
-            names[readable[0]],
-        )
-        return readable[0]
 
     def _world_system(self, solution: NetworkSolution) -> dict[str, Any]:
         """The control's stations and coordinate system, and the grid scale when applied."""
@@ -237,21 +230,25 @@ class Campaign:
         first = len(self.paths)
         self.paths.extend(files)
         self.hashes.extend(ids)
+        was = self.walk.reordered
+        self.walk.add([io.acquired(p) for p in files])
+        if self.walk.reordered and not was:
+            progress.info("the scans' acquisition times give the walk")
         return list(range(first, len(self.paths)))
 
     def _discover(self, new: list[int]) -> None:
-        """Place each new scan (not in the classic chain): in campaign order while the order is
-        a hint (:func:`order_is_a_hint`); once it is not, every new scan together by its best
+        """Place each new scan (not in the classic chain): along the walk while it is a hint
+        (:func:`order_is_a_hint`); once it is not, every new scan together by its best
         coarse matches (:meth:`_place_by_matches`), and no bridge of the network is trusted: a
         pair proposed by a coarse match and passed by its gate alone may be a street beside
         itself shifted by a few blocks (a walk's order vouches for its neighbours)."""
         if self.net.classic:
             return
-        todo = [s for s in new if s in self.summaries]
+        todo = self.walk.sort(s for s in new if s in self.summaries)
         hinted: list[bool] = []  # per scan placed so far: did its order hint place it?
         while todo:
             if not order_is_a_hint(hinted):
-                progress.info("the campaign order is no hint: placing by coarse matches")
+                progress.info("the walk is no hint: placing by coarse matches")
                 self.walked = False
                 self._place_by_matches([s for s in new if s in self.summaries])
                 return
@@ -278,7 +275,7 @@ class Campaign:
         self.where = placement.replace_all(every, self.links)
 
     def _place(self, scan: int) -> bool | None:
-        """Place the scan: first by its neighbours in campaign order (the scan before it, the
+        """Place the scan: first by its neighbours along the walk (the scan before it, the
         best coarse match among them and those that agree with it are registered); without an
         ok link, by every placed scan: the best coarse prediction, registered to the
         :data:`PROBES` placed scans nearest to it, then the next distinct one, up to
@@ -286,13 +283,13 @@ class Campaign:
         in the first step too. Nothing fits: a group of its own, for now. Returns whether the
         order hint placed it (None: no hint, or no neighbour placed)."""
         where = self.where
-        around = [scan + d for d in HINTS]
+        around = self.walk.beside(scan, HINTS)
         hinted = consensus(predict(scan, around, where, self._match))
         missed = False if hinted else None  # what to return unless the hint places it
         known = self._near(scan, where)
         if hinted or known:
-            walk = [scan - 1] if hinted and scan - 1 in where else []  # the scan before it
-            targets = dict.fromkeys([*walk, *(g.via for g in hinted), *known])
+            before = [b for b in self.walk.beside(scan, (-1,)) if hinted and b in where]
+            targets = dict.fromkeys([*before, *(g.via for g in hinted), *known])
             self._register([self._planned(pair_of(scan, t), deep=False) for t in targets])
             if placement.settle(scan, self.links, self.where):
                 return True if hinted else None
@@ -329,7 +326,7 @@ class Campaign:
         in alone, and indoors the extra registrations swayed the joint choice among rivals)
         with scans of other groups are registered, pairs near by known positions first;
         an ok one joins the two groups. The pairs ranked: the group's edge
-        (:func:`~ndt_cli.pipeline.placement.edge`), its neighbours in campaign order and by
+        (:func:`~ndt_cli.pipeline.placement.edge`), its neighbours along the walk and by
         known positions. A round without a join is followed by up to :data:`BRIDGE_ROUNDS` - 1
         more for the groups of several scans (a piece of the campaign, placed out of order,
         whose best coarse matches missed), not for a lone scan (a scan that fits nowhere stays
@@ -345,7 +342,8 @@ class Campaign:
                     continue
                 mine = set(group)
                 near = {pair_of(a, b) for a in group for b in self._near(a, self.where)}
-                hinted = {pair_of(a, a + d) for a in group for d in HINTS if a + d in self.where}
+                walk = {pair_of(a, b) for a in group for b in self.walk.beside(a, HINTS)}
+                hinted = {p for p in walk if p[0] in self.where and p[1] in self.where}
                 edge = {
                     pair_of(a, b) for a in placement.edge(group, self.links) for b in self.where
                 }
@@ -432,9 +430,7 @@ class Campaign:
         self.radius = float(radius)
         failed = {p for p, k in self.links.items() if not k.ok}
         r = radius if np.isfinite(radius) else 0.0
-        self.plan = plan_near(where, self.net.neighbours, r, failed) | {
-            k.pair for k in self.net.pairs
-        }
+        self.plan = plan_near(where, self.net.neighbours, r, failed) | self.net.given
         return self.plan
 
     # ------------------------------------------------------------------ helpers
@@ -446,7 +442,7 @@ class Campaign:
         gate doubted, which placement left aside, a cycle can still confirm; indoors, right
         links between neighbours on a corridor past a room scan) and those tried for scans no
         ok link connects (so that the outputs say why)."""
-        user = {k.pair for k in self.net.pairs}
+        user, adjacent = self.net.given, self.walk.adjacent
         if self.net.classic:
             chain = {k.pair for k in classic_chain(len(self.paths), self.unreadable)}
             pairs = chain | user
@@ -457,7 +453,8 @@ class Campaign:
             pairs = self.plan | user | lonely | checkable
         chosen = sorted(p for p in pairs if p in self.links)
         return [
-            replace(self.links[p], index=n, kind=kind_of(p, user)) for n, p in enumerate(chosen)
+            replace(self.links[p], index=n, kind=kind_of(p, user, adjacent))
+            for n, p in enumerate(chosen)
         ]
 
     def _user_todo(self) -> list[PlannedLink]:

@@ -16,7 +16,7 @@ Scans are indices into the campaign's list here (0, 1, ... in campaign order).
 from __future__ import annotations
 
 import csv
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
@@ -60,12 +60,12 @@ def pair_of(a: int, b: int) -> Pair:
     return (min(a, b), max(a, b))
 
 
-def kind_of(pair: Pair, user: set[Pair]) -> LinkKind:
-    """How a link came to be: given by the user, between neighbours in campaign order, or
-    found."""
+def kind_of(pair: Pair, user: Collection[Pair], adjacent: Collection[Pair]) -> LinkKind:
+    """How a link came to be: given by the user, between neighbours along the walk (the pairs
+    ``adjacent``, :attr:`ndt_cli.pipeline.walk.Walk.adjacent`), or found."""
     if pair in user:
         return LinkKind.USER
-    return LinkKind.ADJACENT if pair[1] - pair[0] == 1 else LinkKind.FOUND
+    return LinkKind.ADJACENT if pair in adjacent else LinkKind.FOUND
 
 
 def classic_chain(n_scans: int, unreadable: Iterable[int] = ()) -> list[PlannedLink]:

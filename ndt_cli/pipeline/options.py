@@ -36,3 +36,8 @@ class NetworkOptions:
     @property
     def classic(self) -> bool:
         return self.neighbours == 1
+
+    @property
+    def given(self) -> set[tuple[int, int]]:
+        """The user's pairs (lo, hi)."""
+        return {k.pair for k in self.pairs}

@@ -123,10 +123,11 @@ def scan_report(index: int, result: ChainResult) -> ScanReport:
 
 
 def tried_links(
-    tried: Sequence[Link], links: Sequence[Link], user: set[Pair]
+    tried: Sequence[Link], links: Sequence[Link], user: set[Pair], adjacent: set[Pair]
 ) -> tuple[TriedLink, ...]:
     """The registrations run (``tried``) that are not ``links`` of the network, indexed after
-    them, in the order of their scans: why each is left out; ``user``: the pairs given."""
+    them, in the order of their scans: why each is left out; ``user``: the pairs given,
+    ``adjacent``: neighbours along the walk (:func:`~ndt_cli.pipeline.network.kind_of`)."""
     network = {k.key for k in links}
     ways = {pair_of(k.target, k.source): (k.target, k.source) for k in links}
     others = sorted(
@@ -137,7 +138,9 @@ def tried_links(
     for n, k in enumerate(others):
         pair = pair_of(k.target, k.source)
         why = _why(k, ways.get(pair))
-        out.append(TriedLink(replace(k, index=len(links) + n, kind=kind_of(pair, user)), why))
+        out.append(
+            TriedLink(replace(k, index=len(links) + n, kind=kind_of(pair, user, adjacent)), why)
+        )
     return tuple(out)
 
 

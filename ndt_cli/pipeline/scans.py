@@ -9,6 +9,7 @@ file name, by as much of its path as tells them apart; the scans of a multi-scan
 from __future__ import annotations
 
 import hashlib
+import logging
 import re
 import threading
 from collections.abc import Sequence
@@ -18,6 +19,7 @@ from typing import Any
 from ndt_cli.errors import InputError
 
 _HASH_CHUNK = 1 << 20
+log = logging.getLogger(__name__)
 
 
 class DuplicateScanError(InputError):
@@ -118,3 +120,20 @@ def scan_names(paths: Sequence[Path]) -> list[str]:
             names = [str(p) for p in paths]
             break
     return names
+
+
+def readable_anchor(anchor: int, unreadable: dict[int, str], names: Sequence[str]) -> int:
+    """The scan whose frame is the world: ``anchor``, or, when that one could not be read,
+    the first scan that could (an aborted copy never defines the world)."""
+    if anchor not in unreadable:
+        return anchor
+    readable = [i for i in range(len(names)) if i not in unreadable]
+    if not readable:
+        return anchor
+    log.warning(
+        "the anchor %s could not be read (%s): the world is the frame of %s",
+        names[anchor],
+        unreadable[anchor],
+        names[readable[0]],
+    )
+    return readable[0]

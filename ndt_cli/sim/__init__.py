@@ -6,7 +6,15 @@ Frames: the **world frame** (right-handed, z up, ground z = 0, the street along 
 gives bit-identical output.
 """
 
-from ndt_cli.sim.campaigns import Survey, block_loop, junction, route, shuffled, two_sites
+from ndt_cli.sim.campaigns import (
+    Survey,
+    block_loop,
+    junction,
+    route,
+    shuffled,
+    two_sites,
+    write_survey,
+)
 from ndt_cli.sim.district import DistrictWorld, scan_district
 from ndt_cli.sim.forest import ForestWorld, scan_forest
 from ndt_cli.sim.ground import Ground
@@ -38,4 +46,5 @@ __all__ = [
     "shuffled",
     "simulate_scan",
     "two_sites",
+    "write_survey",
 ]

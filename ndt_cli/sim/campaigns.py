@@ -12,9 +12,11 @@ from __future__ import annotations
 import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
+from ndt_cli import io
 from ndt_cli.sim.scanner import scanner_pose, simulate_scan
 from ndt_cli.sim.scene import Scene, make_street
 
@@ -22,6 +24,9 @@ RAYS = (1000, 160)  # azimuths x elevations: sparse scans, about 0.1 M points ea
 WIDTH = 18.0  # facade to facade (m)
 _HALF = WIDTH / 2
 _REACH = 130.0  # objects farther than this from a scanner cannot be hit (max range 120 m)
+DAY_START = 86_400.0 + 8 * 3_600.0  # s of the GPS week: Monday, 8 o'clock
+STANDPOINT_S = 600.0  # s from one standpoint's start to the next's (set up, scan, move on)
+SCAN_S = 180.0  # s a scan takes, its points measured evenly over it
 
 
 @dataclass(frozen=True)
@@ -34,6 +39,7 @@ class Survey:
     scans: tuple[np.ndarray, ...]
     poses: tuple[np.ndarray, ...]
     site: tuple[int, ...]  # which site each scan belongs to (0 unless two_sites)
+    taken: tuple[float, ...] = ()  # when each scan began (s of the GPS week), walk order
 
     def __len__(self) -> int:
         return len(self.scans)
@@ -107,7 +113,20 @@ def _survey(
         scans.append(pts)
         poses.append(T)
     names = tuple(f"{prefix}_{k:02d}" for k in range(len(scans)))
-    return Survey(scene, names, tuple(scans), tuple(poses), (0,) * len(scans))
+    taken = tuple(DAY_START + STANDPOINT_S * k for k in range(len(scans)))
+    return Survey(scene, names, tuple(scans), tuple(poses), (0,) * len(scans), taken)
+
+
+def write_survey(survey: Survey, folder: Path, *, times: bool = False) -> list[Path]:
+    """The survey's scans as LAZ files in ``folder`` (``NAME.laz``, in the survey's order); with
+    ``times``, as a scanner writes them: every point with its GPS time, the scan's start
+    (:attr:`Survey.taken`) plus its place among the points over :data:`SCAN_S`."""
+    folder.mkdir(parents=True, exist_ok=True)
+    files = [folder / f"{n}.laz" for n in survey.names]
+    for k, (f, pts) in enumerate(zip(files, survey.scans, strict=True)):
+        t = survey.taken[k] + SCAN_S * np.arange(len(pts)) / max(len(pts), 1) if times else None
+        io.write(f, pts, gps_time=t)
+    return files
 
 
 def junction(seed: int = 0, spacing: float = 16.0, rays: tuple[int, int] = RAYS) -> Survey:
@@ -189,6 +208,7 @@ def shuffled(survey: Survey, seed: int = 0) -> Survey:
         tuple(survey.scans[k] for k in order),
         tuple(survey.poses[k] for k in order),
         tuple(survey.site[k] for k in order),
+        tuple(survey.taken[k] for k in order),
     )
 
 
@@ -212,4 +232,5 @@ def two_sites(
         first.scans + second.scans,
         first.poses + second.poses,
         (0,) * len(first) + (1,) * len(second),
+        first.taken + tuple(t + STANDPOINT_S * len(first) for t in second.taken),
     )
