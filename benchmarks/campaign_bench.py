@@ -1,5 +1,6 @@
-"""Benchmark sections of campaigns: how the cost grows with the number of scans (16, 64, 256
-sparse simulated scans along a street, in walking order and shuffled), a street in
+"""Benchmark sections of campaigns: how the cost grows with the number of scans (16, 64, 128,
+256 sparse simulated scans along a street, in walking order and shuffled, with and without
+the scans' times in their files), a street in
 shuffled order against the same street in order, and field mode's latency (a 2 M-point scan
 renamed into the watched folder until its outputs are published)."""
 
@@ -59,7 +60,7 @@ def _same_as_walk(walk, result, order: list[int]) -> tuple[int, float]:
 
 
 def scaling(
-    sizes: tuple[int, ...] = (16, 64, 128, 256), shuffled: tuple[int, ...] = (16, 64, 128)
+    sizes: tuple[int, ...] = (16, 64, 128, 256), shuffled: tuple[int, ...] = (16, 64, 128, 256)
 ) -> None:
     """Wall time, registrations and coarse matches per scan, in a walk and, for the sizes in
     ``shuffled``, shuffled, its files without times and with them (as scanners write them):
@@ -211,8 +212,8 @@ def watch_latency(dense: bool = False) -> None:
 
 def campaigns(quick: bool, dense: bool = False, large: bool = False) -> None:
     """Every campaign section (``quick``: 16 and 64 scans only; ``dense``: field mode at
-    today's density too; ``large``: 256 scans shuffled and 1,000 in both orders too, hours
-    while the shuffled placement is quadratic)."""
+    today's density too; ``large``: 1,000 scans in every order too, hours while the placement
+    of shuffled files without times is quadratic)."""
     if quick:
         scaling((16, 64), (16, 64))
     else:
