@@ -22,8 +22,10 @@ from ndt_cli.core.transforms import transform_errors
 from ndt_cli.errors import ConfigError, InputError
 from ndt_cli.io.matrices import read_pose_list
 from ndt_cli.pipeline import placement
+from ndt_cli.pipeline.campaign import Campaign
 from ndt_cli.pipeline.chain import run_chain
 from ndt_cli.pipeline.inputs import anchor_index, chain_inputs
+from ndt_cli.pipeline.local_pool import WorkerPool
 from ndt_cli.pipeline.network import LinkKind, PlannedLink
 from ndt_cli.pipeline.verify import NodeStatus
 
@@ -328,3 +330,31 @@ def test_shuffled_files_that_say_when_they_were_taken_are_placed_as_walked(tmp_p
         assert _right(b.T_world_scan, inv0 @ route.poses[scan]), scan
         rot, trans = transform_errors(a.T_world_scan, b.T_world_scan)  # the same links, the
         assert rot < 1e-4 and trans < 1e-5, (scan, rot, trans)  # scans numbered otherwise
+
+
+@pytest.mark.slow
+def test_scans_landing_one_by_one_out_of_time_order_are_walked_by_their_times(tmp_path):
+    """Field mode's campaign fed a scan at a time, the files copied from the card in an order
+    of their own: each new scan is matched first with its neighbours in time already there,
+    and the campaign ends where the same scans given at once end."""
+    route = sim.route(seed=3, n_scans=8, rays=(1500, 200))
+    files = sim.write_survey(route, tmp_path / "scans", times=True)
+    at_once = run_chain(files, Config(), tmp_path / "a", jobs=2)
+    landed = [5, 2, 7, 0, 3, 6, 1, 4]  # file k of the campaign is scan landed[k] of the walk
+    campaign = Campaign(Config(), tmp_path / "b", WorkerPool(2))
+    try:
+        for scan in landed:
+            campaign.add_scan(files[scan])
+        assert [landed[k] for k in campaign.walk.order] == list(range(8)) and campaign.walked
+        one_by_one = campaign.result()
+    finally:
+        campaign.close()
+    a = at_once.solution.scans
+    b = [one_by_one.solution.scans[landed.index(scan)] for scan in range(8)]
+    assert all(x.status is y.status is NodeStatus.OK for x, y in zip(a, b, strict=True))
+    for k in range(1, 8):  # each scan in the frame of the walk's first scan
+        T_a = np.linalg.inv(a[0].T_world_scan) @ a[k].T_world_scan
+        T_b = np.linalg.inv(b[0].T_world_scan) @ b[k].T_world_scan
+        rot, trans = transform_errors(T_a, T_b)  # networks of a few other links, scans up to
+        assert rot < 0.01 and trans < 0.01, (k, rot, trans)  # 112 m away: within a centimetre
+        assert _right(T_b, route.relative(0, k)), k
