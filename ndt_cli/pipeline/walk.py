@@ -27,7 +27,7 @@ class Walk:
 
     @property
     def timed(self) -> bool:
-        """Whether the walk is the scans' time order (every scan has a time)."""
+        """Whether every scan has a time (the walk is then their time order, ``by_time``)."""
         return bool(self.times) and all(t is not None for t in self.times)
 
     def add(self, times: Sequence[float | None]) -> None:
