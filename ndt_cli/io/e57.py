@@ -9,6 +9,7 @@ reported, never used for registration).
 from __future__ import annotations
 
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -57,13 +58,8 @@ CHUNK = 4_000_000  # records read at a time by read_xyz
 
 def record_count(spec: str | Path) -> int:
     """Point records of the scan ``spec`` names (its header's count, invalid records too)."""
-    path, index = split_spec(spec)
-    e57 = open_file(path)
-    try:
-        k = which_scan(path, index, int(e57.scan_count), str(spec))
-        return int(e57.get_header(k).point_count)
-    finally:
-        e57.close()
+    with scan_header(spec) as header:
+        return int(header.point_count)
 
 
 def _coordinates(fields: list[str], spec: str | Path) -> tuple[tuple[str, ...], str]:
@@ -169,35 +165,35 @@ def read_xyz(spec: str | Path) -> np.ndarray:
     return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
 
-def header_pose(spec: str | Path) -> np.ndarray | None:
-    """The 4x4 pose stored in a scan's header (scan frame to file frame), or None."""
+@contextmanager
+def scan_header(spec: str | Path) -> Iterator[Any]:
+    """The pye57 header of the scan ``spec`` names, its file open while the block runs."""
     path, index = split_spec(spec)
     e57 = open_file(path)
     try:
-        k = which_scan(path, index, int(e57.scan_count), str(spec))
-        header = e57.get_header(k)
+        yield e57.get_header(which_scan(path, index, int(e57.scan_count), str(spec)))
+    finally:
+        e57.close()
+
+
+def header_pose(spec: str | Path) -> np.ndarray | None:
+    """The 4x4 pose stored in a scan's header (scan frame to file frame), or None."""
+    with scan_header(spec) as header:
         if not header.has_pose():
             return None
         T = np.eye(4)
         T[:3, :3] = np.asarray(header.rotation_matrix, dtype=np.float64)
         T[:3, 3] = np.asarray(header.translation, dtype=np.float64)
         return T
-    finally:
-        e57.close()
 
 
 def acquisition_start(spec: str | Path) -> float | None:
     """The scan header's ``acquisitionStart`` (GPS seconds), or None when it has none."""
-    path, index = split_spec(spec)
-    e57 = open_file(path)
-    try:
-        header = e57.get_header(which_scan(path, index, int(e57.scan_count), str(spec)))
+    with scan_header(spec) as header:
         try:
             return float(header.acquisitionStart_dateTimeValue)
         except Exception:  # libE57 raises when the optional element is missing
             return None
-    finally:
-        e57.close()
 
 
 def write(path: str | Path, scans: list[np.ndarray], poses: list[np.ndarray | None]) -> None:
