@@ -95,6 +95,24 @@ def test_within_a_group_the_pose_that_fits_is_chosen_and_none_fitting_is_rejecte
     assert got[6].chosen is None and got[6].rejected
 
 
+def test_links_only_checked_never_join_groups_however_well_they_agree():
+    """Two probes between the groups that agree on the true placement join them when they may;
+    only checked, they stay undecided, while one within a group is still chosen by its fit."""
+    groups, poses = _groups()
+    hyps = {
+        7: [_hyp(7, 0, 0, 3, _true(0, 3), 1.0), _hyp(7, 1, 0, 3, _flipped(0, 3), 0.6)],
+        8: [
+            _hyp(8, 0, 1, 4, _true(1, 4), 1.0),
+            _hyp(8, 1, 1, 4, _pose(5, 5, 90) @ _true(1, 4), 0.7),
+        ],
+        5: [_hyp(5, 0, 0, 2, _flipped(0, 2), 1.0), _hyp(5, 1, 0, 2, _true(0, 2), 0.8)],
+    }
+    assert choose(groups, poses, hyps, CHI2_6_999, 0.5)[7].chosen.choice == 0
+    got = choose(groups, poses, hyps, CHI2_6_999, 0.5, checked_only={5, 7, 8})
+    assert got[7].chosen is None and got[8].chosen is None and not got[7].rejected
+    assert got[5].chosen.choice == 1
+
+
 def test_a_scan_on_no_firm_link_is_a_group_of_its_own():
     groups, poses = _groups()
     groups[5], poses[5] = None, None  # scan 5 has only ambiguous links
@@ -174,3 +192,35 @@ def test_the_triangles_of_a_graph_are_those_of_every_triple_in_the_same_order():
         ]
         assert list(triangles(pairs)) == brute, (n, density)
     assert list(triangles([(0, 1), (1, 2)])) == []
+
+
+def test_the_network_holds_probes_with_rivals_only_to_check_them():
+    """Of the links registered, a probe the plan did not pair is in the network when its gate
+    passed it, and, only to be checked, when it has rivals and is determined everywhere; a
+    weak or refuted probe with rivals is left out. A planned link with rivals is an ordinary
+    member; the classic chain holds its chain whatever each link is."""
+    from ndt_cli.ndt.result import Rival, Status
+    from ndt_cli.pipeline.members import network_links
+
+    rival = Rival(np.eye(4), np.eye(3), 0.6, 0.0, "a pose slid 0.5 m")
+    weak = np.array([1.0, 0.0, 0.0])
+    made = {
+        (0, 1): (Status.OK, {}),
+        (1, 2): (Status.SUSPECT, {"rivals": (rival,)}),  # planned
+        (0, 2): (Status.SUSPECT, {"rivals": (rival,)}),  # a probe: only checked
+        (2, 3): (Status.SUSPECT, {"rivals": (rival,), "weak_direction": weak}),  # left out
+        (1, 3): (Status.OK, {}),  # gate-ok (scans 2 and 3 are not lonely)
+        (0, 3): (Status.SUSPECT, {"refuted": True}),  # refuted: left out
+    }
+    registered = {
+        (a, b): replace(_registered(status, **fields), target=a, source=b)
+        for (a, b), (status, fields) in made.items()
+    }
+    members = network_links(registered, {(0, 1), (1, 2)}, set(), {(0, 1), (1, 2)})
+    pairs = [(k.target, k.source) for k in members.links]
+    assert pairs == [(0, 1), (0, 2), (1, 2), (1, 3)]
+    assert [k.index for k in members.links] == [0, 1, 2, 3]
+    assert members.checked_only == {1}
+    classic = network_links(registered, set(), set(), set(), classic=(4, ()))
+    assert [(k.target, k.source) for k in classic.links] == [(0, 1), (1, 2), (2, 3)]
+    assert not classic.checked_only

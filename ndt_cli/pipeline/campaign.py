@@ -59,13 +59,13 @@ from ndt_cli.pipeline.executors import Executor
 from ndt_cli.pipeline.guesses import relative
 from ndt_cli.pipeline.link_runner import LinkRunner
 from ndt_cli.pipeline.links import Link, LinkStore
+from ndt_cli.pipeline.members import Members, network_links
 from ndt_cli.pipeline.network import (
     LinkKind,
     Pair,
     PlannedLink,
     classic_chain,
     default_radius,
-    kind_of,
     pair_of,
     plan_near,
 )
@@ -78,7 +78,7 @@ from ndt_cli.pipeline.scans import (
     readable_anchor,
     scan_names,
 )
-from ndt_cli.pipeline.solution import NetworkSolution, determined, solve
+from ndt_cli.pipeline.solution import NetworkSolution, solve
 from ndt_cli.pipeline.walk import Walk
 
 progress = logging.getLogger("ndt_cli.progress")
@@ -163,7 +163,8 @@ class Campaign:
 
     def result(self) -> ChainResult:
         """Solve the planned network: a pose and a status per scan."""
-        links = self._network()
+        members = self._network()
+        links = members.links
         names = tuple(scan_names(self.paths))
         anchor = readable_anchor(self.anchor, self.unreadable, names)
         if self.net.adjust and links:
@@ -178,6 +179,7 @@ class Campaign:
             self.net.grid_scale,
             self.cfg.quality.max_ambiguity,
             self.trusts_bridges,
+            members.checked_only,
         )
         log_unused_controls(solution.datum)
         return ChainResult(
@@ -435,27 +437,10 @@ class Campaign:
 
     # ------------------------------------------------------------------ helpers
 
-    def _network(self) -> list[Link]:
-        """The links of the result, indexed 0, 1, ...: the plan, the user's pairs, every link
-        its gate passed (evidence against a placement built on wrong links), every firm link
-        determined in every direction (:func:`~ndt_cli.pipeline.solution.determined`: one its
-        gate doubted, which placement left aside, a cycle can still confirm; indoors, right
-        links between neighbours on a corridor past a room scan) and those tried for scans no
-        ok link connects (so that the outputs say why)."""
-        user, adjacent = self.net.given, self.walk.adjacent
-        if self.net.classic:
-            chain = {k.pair for k in classic_chain(len(self.paths), self.unreadable)}
-            pairs = chain | user
-        else:
-            linked = {i for p, k in self.links.items() if k.ok for i in p}  # scans with an ok link
-            lonely = {p for p in self.links if not set(p) & linked}
-            checkable = {p for p, k in self.links.items() if k.ok or determined(k)}
-            pairs = self.plan | user | lonely | checkable
-        chosen = sorted(p for p in pairs if p in self.links)
-        return [
-            replace(self.links[p], index=n, kind=kind_of(p, user, adjacent))
-            for n, p in enumerate(chosen)
-        ]
+    def _network(self) -> Members:
+        """The links of the result (:func:`~ndt_cli.pipeline.members.network_links`)."""
+        classic = (len(self.paths), self.unreadable) if self.net.classic else None
+        return network_links(self.links, self.plan, self.net.given, self.walk.adjacent, classic)
 
     def _user_todo(self) -> list[PlannedLink]:
         n = len(self.paths)

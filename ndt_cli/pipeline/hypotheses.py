@@ -21,6 +21,8 @@ rivals) is a hypothesis judged against the *firm* links, those without rivals:
   closes the triangle joins the three, when no other choice closes it with as much evidence.
 - A lone link between two groups on no such cycle is never enough: it leaves the scans beyond
   it suspect, its rivals named.
+- A link *only checked* (a probe the plan did not ask for, :mod:`ndt_cli.pipeline.members`)
+  is chosen within a group only, never to join groups.
 
 The chosen poses become links of the network like any other; the links left ambiguous do not.
 Frames as in :mod:`ndt_cli.pipeline.graph`: nodes' poses in their group's frame.
@@ -28,7 +30,7 @@ Frames as in :mod:`ndt_cli.pipeline.graph`: nodes' poses in their group's frame.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Collection, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from itertools import product
 
@@ -88,10 +90,12 @@ def choose(
     hypotheses: dict[int, list[Hypothesis]],
     threshold: float,
     ambiguity: float,
+    checked_only: Collection[int] = (),
 ) -> dict[int, Choice]:
     """A :class:`Choice` for every ambiguous link (keys of ``hypotheses``), given the rigid
     group of every node under the firm links (None: on no firm link) and its pose in its
-    group's frame (see the module docstring)."""
+    group's frame (see the module docstring). The links ``checked_only`` are chosen within a
+    group only, never to join groups."""
     n = len(groups)
     fresh = iter(range(max((g for g in groups if g is not None), default=-1) + 1, 2 * n + 1))
     state = _Groups(
@@ -102,7 +106,7 @@ def choose(
     while True:
         pending = {k: h for k, h in hypotheses.items() if k not in choices}
         choices.update(_within(state, pending, threshold))
-        pending = {k: h for k, h in pending.items() if k not in choices}
+        pending = {k: h for k, h in pending.items() if k not in choices and k not in checked_only}
         joined = _join_best(state, pending, threshold, ambiguity)
         if not joined:
             joined = _close_triangle(state, pending, threshold, ambiguity)

@@ -17,7 +17,7 @@ reduction point), so that georeferenced coordinates never enter it:
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -108,6 +108,12 @@ def determined(link: Link) -> bool:
     return firm(link) and link.result.weak_direction is None
 
 
+def contested(link: Link) -> bool:
+    """A usable link with rivals whose poses the data fix in every direction: a cycle of firm
+    links can choose among them (:mod:`ndt_cli.pipeline.members`)."""
+    return usable(link) and bool(link.result.rivals) and link.result.weak_direction is None
+
+
 def link_covariance(r: RegistrationResult) -> np.ndarray:
     """6x6 covariance of a link between the reduced frames (GTSAM Pose3 tangent, see
     :mod:`ndt_cli.pipeline.covariance`): from ICP's normal matrix when ICP refined it, else
@@ -177,16 +183,19 @@ def solve(
     grid_scale: float = 1.0,
     ambiguity: float = 0.95,
     trust_bridges: bool = True,
+    checked_only: Collection[int] = frozenset(),
 ) -> NetworkSolution:
     """The pose and status of every scan, and the state of every link; with the adjustment,
     the anchor's cluster in the world of :mod:`ndt_cli.pipeline.datum` (levelled, or the
     coordinate system of the ``controls``, whose grid distance over ground is ``grid_scale``).
     ``ambiguity``: the share of evidence that makes a second placement of two groups a rival
     of the first (``quality.max_ambiguity``; :mod:`ndt_cli.pipeline.hypotheses`);
-    ``trust_bridges``: a link on no cycle may tie a scan in (``quality.trust_bridges``)."""
+    ``trust_bridges``: a link on no cycle may tie a scan in (``quality.trust_bridges``);
+    ``checked_only``: the ambiguous links (by index) that may only be chosen where firm links
+    tie their scans together (:mod:`ndt_cli.pipeline.members`)."""
     plain = tuple(chained(n_scans, links, anchor, {LinkKind.ADJACENT}))
     if adjust:
-        judging = (ambiguity, trust_bridges)
+        judging = (ambiguity, trust_bridges, frozenset(checked_only))
         return _adjusted(n_scans, anchor, links, unreadable, plain, controls, grid_scale, judging)
     poses = chained(n_scans, links, anchor, set(LinkKind))
     scans = tuple(
@@ -220,12 +229,13 @@ def _adjusted(
     plain: tuple[np.ndarray | None, ...],
     controls: Sequence[Control] = (),
     grid_scale: float = 1.0,
-    judging: tuple[float, bool] = (0.95, True),
+    judging: tuple[float, bool, frozenset[int]] = (0.95, True, frozenset()),
 ) -> NetworkSolution:
     """Verify and adjust the network of usable links, set it in the world; map nodes and edges
     back. Links with rivals stay out of the consensus: the poses chosen among theirs join the
     firm links (:mod:`ndt_cli.pipeline.hypotheses`). ``judging``: the evidence share that
-    makes a rival placement and whether bridges are trusted (see :func:`solve`)."""
+    makes a rival placement, whether bridges are trusted and the links only checked (see
+    :func:`solve`)."""
     net = _network(n_scans, anchor, links, *judging)
     red = reductions(n_scans, links)
     nodes = _ambiguous_nodes(net.v, net.left, net.texts)
@@ -259,7 +269,12 @@ class _Network:
 
 
 def _network(
-    n_scans: int, anchor: int, links: Sequence[Link], ambiguity: float, trust_bridges: bool
+    n_scans: int,
+    anchor: int,
+    links: Sequence[Link],
+    ambiguity: float,
+    trust_bridges: bool,
+    checked_only: frozenset[int],
 ) -> _Network:
     """Verify the firm links (usable, without rivals), choose among the poses of the links
     with rivals, and of the firm links that only bridges would keep, against them
@@ -274,7 +289,7 @@ def _network(
     hyps = {k: _hypotheses(links[k], k) for k in decided if links[k].result.rivals}
     hyps.update({k: [Hypothesis(k, 0, _edge(links[k]), 1.0)] for k in loose if k in decided})
     groups, poses = [n.cluster for n in v.nodes], [n.pose for n in v.nodes]
-    choices = choose(groups, poses, hyps, v.threshold, ambiguity)
+    choices = choose(groups, poses, hyps, v.threshold, ambiguity, checked_only)
     chosen = sorted(k for k, c in choices.items() if c.chosen is not None)
     if chosen:
         used = [k for k in firm_ids if k not in loose] + chosen

@@ -1,0 +1,69 @@
+"""Which registrations of a campaign are links of its network, and how far the network may
+use each.
+
+A campaign registers more pairs than its plan asks for: placement probes scans against each
+other before it knows where they are (:mod:`ndt_cli.pipeline.discovery`). Such a probe is
+evidence too. One its gate passed argues against a placement built on wrong links; a firm one
+(no rivals) that its gate doubted can still be confirmed by a cycle. So both are links of the
+network (:func:`network_links`).
+
+A probe with rivals (:func:`~ndt_cli.pipeline.solution.contested`) is a link of the network
+too, but only to be *checked*: the network may choose one of its poses where the firm links
+already tie its two scans together (a cycle checks it), never let it join two groups. Two
+groups join where two ambiguous links agree on one placement; the probes of a symmetric
+corridor, tried between scans 30 m apart, agree turned by 180 degrees as well as the truth
+does, and joined a closed corridor's far end, turned, to its anchor. On an office floor the
+same probes closed the cycle that made three scans ok: a right link between corridor
+neighbours, a rival 0.5 m along the corridor at 0.53 of its evidence, which the plan had not
+paired.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Mapping
+from dataclasses import dataclass, replace
+
+from ndt_cli.pipeline.links import Link
+from ndt_cli.pipeline.network import Pair, classic_chain, kind_of
+from ndt_cli.pipeline.solution import contested, determined
+
+
+@dataclass(frozen=True)
+class Members:
+    """The links of a network, indexed 0, 1, ... in the order of their pairs, and the indices
+    of those the network may only check (never join groups by)."""
+
+    links: list[Link]
+    checked_only: frozenset[int]
+
+
+def network_links(
+    registered: Mapping[Pair, Link],
+    plan: Collection[Pair],
+    user: Collection[Pair],
+    adjacent: Collection[Pair],
+    classic: tuple[int, Collection[int]] | None = None,
+) -> Members:
+    """The links of the network among the ``registered`` ones (by pair): the ``plan``, the
+    ``user``'s pairs, every link its gate passed, every firm link determined in every
+    direction (:func:`~ndt_cli.pipeline.solution.determined`), those tried for scans no ok
+    link connects (so that the outputs say why), and, to be checked only, every other link
+    with rivals. ``classic``: (number of scans, unreadable scans) for the classic chain, whose
+    network is the chain in the order given and the user's pairs. ``adjacent``: neighbours
+    along the walk (:func:`~ndt_cli.pipeline.network.kind_of`)."""
+    if classic is not None:
+        pairs = {k.pair for k in classic_chain(*classic)} | set(user)
+        checked: set[Pair] = set()
+    else:
+        linked = {i for p, k in registered.items() if k.ok for i in p}
+        lonely = {p for p in registered if not set(p) & linked}
+        sure = {p for p, k in registered.items() if k.ok or determined(k)}
+        pairs = set(plan) | set(user) | lonely | sure
+        checked = {p for p, k in registered.items() if contested(k)} - pairs
+        pairs |= checked
+    chosen = sorted(p for p in pairs if p in registered)
+    links = [
+        replace(registered[p], index=n, kind=kind_of(p, user, adjacent))
+        for n, p in enumerate(chosen)
+    ]
+    return Members(links, frozenset(n for n, p in enumerate(chosen) if p in checked))
