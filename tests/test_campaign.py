@@ -333,6 +333,24 @@ def test_shuffled_files_that_say_when_they_were_taken_are_placed_as_walked(tmp_p
 
 
 @pytest.mark.slow
+def test_a_pair_s_coarse_match_is_the_same_whichever_scan_came_first(tmp_path):
+    """Two scans given either way round: the coarse match that places the second is computed
+    on the scan whose content sorts first, so both campaigns keep the same pose, inverted
+    (to rounding: the search is not symmetric, and a pixel's difference swayed which
+    neighbours a scan of a long route was registered to)."""
+    route = sim.route(seed=4, n_scans=2, rays=(600, 90))
+    files = sim.write_survey(route, tmp_path / "scans")
+    found = []
+    for order in (files, files[::-1]):
+        campaign = Campaign(Config(), tmp_path / f"out{len(found)}", WorkerPool(1))
+        try:
+            campaign.add_scans(order)
+        finally:
+            campaign.close()
+        found.append(campaign.coarse[(0, 1)].T_target_source)
+    np.testing.assert_allclose(found[0], np.linalg.inv(found[1]), rtol=0, atol=1e-12)
+
+
 def test_scans_landing_one_by_one_out_of_time_order_are_walked_by_their_times(tmp_path):
     """Field mode's campaign fed a scan at a time, the files copied from the card in an order
     of their own: each new scan is matched first with its neighbours in time already there,

@@ -39,6 +39,26 @@ def test_the_workers_give_every_pair_the_match_computed_here(sketches):
         assert np.array_equal(found[(a, b)].T_target_source, here.T_target_source), (a, b)
 
 
+def test_each_pair_is_matched_on_the_target_given_and_kept_as_its_source_on_its_target(
+    sketches,
+):
+    """Given (hi, lo), the match is hi's sketch matched with lo's as the source, kept by
+    (lo, hi) as the inverse pose; the search is not symmetric, so that differs from matching
+    lo's first (which the keys alone would not tell)."""
+    pairs = [(b, a) for a in sketches for b in sketches if a < b][:6]
+    found = match_pairs(_LosesBatch(lost=-1), sketches, pairs)
+    assert sorted(found) == sorted((a, b) for b, a in pairs)
+    differs = 0
+    for b, a in pairs:
+        there = coarse_match(sketches[b], sketches[a])
+        np.testing.assert_array_equal(
+            found[(a, b)].T_target_source, np.linalg.inv(there.T_target_source)
+        )
+        direct = coarse_match(sketches[a], sketches[b]).T_target_source
+        differs += not np.array_equal(direct, found[(a, b)].T_target_source)
+    assert differs > 0
+
+
 class _LosesBatch:
     """An executor whose worker is lost on one batch: that batch's value is a failure, the
     others are computed (in this process)."""

@@ -41,7 +41,7 @@ from ndt_cli.errors import UserInterruptError, caused_by_interrupt
 from ndt_cli.ndt.overlap import CoarseMatch, coarse_match
 from ndt_cli.pipeline import placement
 from ndt_cli.pipeline.by_control import frame_of, home_group, station_links
-from ndt_cli.pipeline.coarse import match_pairs, partners
+from ndt_cli.pipeline.coarse import keyed, match_pairs, partners
 from ndt_cli.pipeline.control import matched
 from ndt_cli.pipeline.datum import log_unused_controls
 from ndt_cli.pipeline.discovery import (
@@ -267,7 +267,7 @@ class Campaign:
         every = sorted(set(self.where) | set(todo))
         wanted = {pair_of(a, b) for a in todo for b in every if a != b} - self.coarse.keys()
         sketches = {k: self.summaries[k].sketch for k in every}
-        self.coarse |= match_pairs(self.executor, sketches, wanted)
+        self.coarse |= match_pairs(self.executor, sketches, map(self._ordered, wanted))
         pairs: set[Pair] = set()
         for scan in todo:
             others = [o for o in every if o != scan]
@@ -446,12 +446,16 @@ class Campaign:
         n = len(self.paths)
         return [k for k in self.net.pairs if k.pair not in self.links and max(k.pair) < n]
 
-    def _planned(self, pair: Pair, deep: bool = True) -> PlannedLink:
-        """A found pair, its target the scan whose content sorts first (so that the link is
-        the same whatever the order of the scans); ``deep`` False for a probe."""
+    def _ordered(self, pair: Pair) -> tuple[int, int]:
+        """(target, source): the target the scan whose content sorts first, so that what is
+        computed of a pair is the same whatever the order of the scans."""
         a, b = pair
-        if (self.hashes[b], b) < (self.hashes[a], a):
-            a, b = b, a
+        return (b, a) if (self.hashes[b], b) < (self.hashes[a], a) else (a, b)
+
+    def _planned(self, pair: Pair, deep: bool = True) -> PlannedLink:
+        """A found pair, its target the scan whose content sorts first (:meth:`_ordered`);
+        ``deep`` False for a probe."""
+        a, b = self._ordered(pair)
         guess = relative(self.net.init_poses, a, b, self.net.init_sigma)
         return PlannedLink(a, b, LinkKind.FOUND, guess, deep)
 
@@ -460,11 +464,13 @@ class Campaign:
         self.tasks.register(planned, both_ways, classic=self.net.classic)
 
     def _match(self, a: int, b: int) -> CoarseMatch:
-        """The coarse match of scan ``b`` on scan ``a`` (cached per pair)."""
+        """The coarse match of scan ``b`` on scan ``a`` (cached per pair, computed with the
+        target :meth:`_ordered` gives)."""
         pair = pair_of(a, b)
         if pair not in self.coarse:
-            lo, hi = pair
-            self.coarse[pair] = coarse_match(self.summaries[lo].sketch, self.summaries[hi].sketch)
+            t, s = self._ordered(pair)
+            m = coarse_match(self.summaries[t].sketch, self.summaries[s].sketch)
+            self.coarse[pair] = keyed(m, t, s)[1]
         m = self.coarse[pair]
         return m if a == pair[0] else replace(m, T_target_source=inv(m.T_target_source))
 

@@ -10,7 +10,10 @@ here. A match is the same wherever it is computed.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import replace
 from functools import partial
+
+from numpy.linalg import inv
 
 from ndt_cli.ndt.overlap import CoarseMatch, Sketch, coarse_match
 from ndt_cli.pipeline.executors import Executor
@@ -27,11 +30,20 @@ def match_batch(pairs: Sequence[tuple[Sketch, Sketch]]) -> list[CoarseMatch]:
     return [coarse_match(target, source) for target, source in pairs]
 
 
+def keyed(match: CoarseMatch, target: int, source: int) -> tuple[Pair, CoarseMatch]:
+    """The match of ``source`` on ``target`` as the campaign keeps it: by the pair (lo, hi),
+    as the pose of ``hi`` on ``lo``."""
+    if target < source:
+        return (target, source), match
+    return (source, target), replace(match, T_target_source=inv(match.T_target_source))
+
+
 def match_pairs(
-    executor: Executor, sketches: Mapping[int, Sketch], pairs: Iterable[Pair]
+    executor: Executor, sketches: Mapping[int, Sketch], pairs: Iterable[tuple[int, int]]
 ) -> dict[Pair, CoarseMatch]:
-    """The coarse match of each pair (lo, hi) of scans (its source ``hi`` on its target
-    ``lo``), in batches of :data:`BATCH_PAIRS` on ``executor``."""
+    """The coarse match of each pair (target, source) of scans, in batches of
+    :data:`BATCH_PAIRS` on ``executor``, kept by pair (:func:`keyed`). The caller chooses
+    each pair's target: the search is not symmetric, its pose differs by up to a pixel."""
     todo = sorted(set(pairs))
     chunks = [todo[k : k + BATCH_PAIRS] for k in range(0, len(todo), BATCH_PAIRS)]
     tasks = {
@@ -42,7 +54,7 @@ def match_pairs(
     for n, value in executor.run(tasks):
         if isinstance(value, Failure):
             value = tasks[n]()
-        found.update(zip(chunks[n], value, strict=True))
+        found.update(keyed(m, a, b) for (a, b), m in zip(chunks[n], value, strict=True))
     return found
 
 
