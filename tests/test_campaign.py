@@ -27,6 +27,7 @@ from ndt_cli.pipeline.chain import run_chain
 from ndt_cli.pipeline.inputs import anchor_index, chain_inputs
 from ndt_cli.pipeline.local_pool import WorkerPool
 from ndt_cli.pipeline.network import LinkKind, PlannedLink
+from ndt_cli.pipeline.options import NetworkOptions
 from ndt_cli.pipeline.verify import NodeStatus
 
 runner = CliRunner()
@@ -292,6 +293,55 @@ def test_a_shuffled_route_is_placed_by_its_coarse_matches_with_the_same_poses(tm
         if b.status is NodeStatus.OK:  # the same network but the bridge: within a link's
             rot, trans = transform_errors(a.T_world_scan, b.T_world_scan)  # accuracy
             assert rot < 0.005 and trans < 0.005, (scan, rot, trans)
+
+
+def _guesses(poses: list[np.ndarray], seed: int) -> dict[int, np.ndarray]:
+    """Approximate poses, as a site's GNSS and compass give them: each within 1 m and 5
+    degrees of the truth (the default --init-sigma)."""
+    rng = np.random.default_rng(seed)
+    out = {}
+    for k, P in enumerate(poses):
+        a = np.radians(rng.uniform(-5.0, 5.0))
+        turn = np.eye(4)
+        turn[:2, :2] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
+        guess = P @ turn
+        guess[:2, 3] += rng.uniform(-0.7, 0.7, 2)
+        out[k] = guess
+    return out
+
+
+@pytest.mark.slow
+def test_scans_placed_out_of_order_are_matched_coarsely_only_where_no_position_is_known(
+    tmp_path,
+):
+    """Ten scans of a route in random order placed together (what a campaign does once its
+    order proves no hint), eight with an approximate pose: those are registered to the scans
+    their poses put near them, and only the two without one are matched coarsely while
+    placing (17 pairs, not all 45); bridged and consolidated, every scan is ok and right."""
+    route = sim.route(seed=3, n_scans=10, rays=(1000, 120))
+    mixed = sim.shuffled(route, seed=2)
+    order = [
+        next(j for j, P in enumerate(route.poses) if np.array_equal(P, Q)) for Q in mixed.poses
+    ]
+    blind = {2, 7}  # files without an approximate pose
+    guesses = _guesses(list(mixed.poses), seed=4)
+    net = NetworkOptions(init_poses={k: T for k, T in guesses.items() if k not in blind})
+    campaign = Campaign(Config(), tmp_path / "out", WorkerPool(2), anchor=0, network=net)
+    try:
+        new = campaign._admit(sim.write_survey(mixed, tmp_path / "mixed"))
+        campaign.tasks.summarise(new)
+        campaign._place_by_matches(new)
+        pairs = {(a, b) for a in new for b in new if a < b and {a, b} & blind}
+        assert set(campaign.coarse) == pairs
+        campaign._bridge(new)
+        campaign._consolidate()
+        scans = campaign.result().solution.scans
+    finally:
+        campaign.close()
+    inv_0, inv_true = np.linalg.inv(scans[0].T_world_scan), np.linalg.inv(route.poses[order[0]])
+    for k, scan in enumerate(order):
+        assert scans[k].status is NodeStatus.OK, (k, scans[k].reason)
+        assert _right(inv_0 @ scans[k].T_world_scan, inv_true @ route.poses[scan]), k
 
 
 @pytest.mark.slow

@@ -259,19 +259,22 @@ class Campaign:
                 hinted.append(outcome)
 
     def _place_by_matches(self, todo: list[int]) -> None:
-        """Place ``todo`` all at once: each registered, in one batch, to its best coarse matches
-        among all the scans (:func:`~ndt_cli.pipeline.coarse.partners`) and to those near it by
-        known positions; then every scan placed again by the links. Not one at a time beside
-        the scans placed: a scan whose neighbours were not placed yet has a wrong best match (a
-        street fits itself shifted), and paid five or six registrations before it was alone."""
+        """Place ``todo`` all at once: each registered, in one batch, to the scans near it by
+        known positions, or without any, to its best coarse matches among all the scans
+        (:func:`~ndt_cli.pipeline.coarse.partners`: quadratic, so only for those); then every
+        scan placed again by the links. Not one at a time beside the scans placed: a scan
+        whose neighbours were not placed yet has a wrong best match (a street fits itself
+        shifted), and paid five or six registrations before it was alone."""
         every = sorted(set(self.where) | set(todo))
-        wanted = {pair_of(a, b) for a in todo for b in every if a != b} - self.coarse.keys()
+        near = {scan: self._near(scan, [o for o in every if o != scan]) for scan in todo}
+        blind = [scan for scan in todo if not near[scan]]
+        wanted = {pair_of(a, b) for a in blind for b in every if a != b} - self.coarse.keys()
         sketches = {k: self.summaries[k].sketch for k in every}
         self.coarse |= match_pairs(self.executor, sketches, map(self._ordered, wanted))
         pairs: set[Pair] = set()
         for scan in todo:
             others = [o for o in every if o != scan]
-            found = [*partners(self.coarse, scan, others), *self._near(scan, others)]
+            found = near[scan] or partners(self.coarse, scan, others)
             pairs |= {pair_of(scan, o) for o in found}
         self._register([self._planned(p, deep=False) for p in sorted(pairs)])
         self.where = placement.replace_all(every, self.links)
