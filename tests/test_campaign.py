@@ -312,27 +312,33 @@ def _guesses(poses: list[np.ndarray], seed: int) -> dict[int, np.ndarray]:
 
 @pytest.mark.slow
 def test_scans_placed_out_of_order_are_matched_coarsely_only_where_no_position_is_known(
-    tmp_path,
+    tmp_path, caplog
 ):
     """Ten scans of a route in random order placed together (what a campaign does once its
-    order proves no hint), eight with an approximate pose: those are registered to the scans
-    their poses put near them, and only the two without one are matched coarsely while
-    placing (17 pairs, not all 45); bridged and consolidated, every scan is ok and right."""
+    order proves no hint), eight with an approximate pose, and a scan of another street:
+    those with a pose are registered to the scans their poses put near them, and only the
+    others are matched coarsely, first with the scans their landmarks rank first; the other
+    street's scan, which none of those places, then with every scan. Bridged and
+    consolidated, every scan of the route is ok and right, the other street's is not ok."""
     route = sim.route(seed=3, n_scans=10, rays=(1000, 120))
     mixed = sim.shuffled(route, seed=2)
     order = [
         next(j for j, P in enumerate(route.poses) if np.array_equal(P, Q)) for Q in mixed.poses
     ]
-    blind = {2, 7}  # files without an approximate pose
+    stranger = sim.write_survey(sim.route(seed=41, n_scans=2, rays=(1000, 120)), tmp_path / "x")
+    blind = {2, 7, 10}  # files without an approximate pose; 10: the other street's scan
     guesses = _guesses(list(mixed.poses), seed=4)
     net = NetworkOptions(init_poses={k: T for k, T in guesses.items() if k not in blind})
     campaign = Campaign(Config(), tmp_path / "out", WorkerPool(2), anchor=0, network=net)
     try:
-        new = campaign._admit(sim.write_survey(mixed, tmp_path / "mixed"))
+        files = [*sim.write_survey(mixed, tmp_path / "mixed"), stranger[0]]
+        new = campaign._admit(files)
         campaign.tasks.summarise(new)
-        campaign._place_by_matches(new)
-        pairs = {(a, b) for a in new for b in new if a < b and {a, b} & blind}
-        assert set(campaign.coarse) == pairs
+        with caplog.at_level("INFO", logger="ndt_cli.progress"):
+            campaign._place_by_matches(new)
+        assert campaign.coarse and all(set(p) & blind for p in campaign.coarse)
+        assert {p for p in campaign.coarse if 10 in p} == {(k, 10) for k in range(10)}
+        assert any("placed by no landmark" in r.getMessage() for r in caplog.records)
         campaign._bridge(new)
         campaign._consolidate()
         scans = campaign.result().solution.scans
@@ -342,6 +348,7 @@ def test_scans_placed_out_of_order_are_matched_coarsely_only_where_no_position_i
     for k, scan in enumerate(order):
         assert scans[k].status is NodeStatus.OK, (k, scans[k].reason)
         assert _right(inv_0 @ scans[k].T_world_scan, inv_true @ route.poses[scan]), k
+    assert scans[10].status is not NodeStatus.OK
 
 
 @pytest.mark.slow

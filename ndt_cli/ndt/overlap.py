@@ -13,6 +13,7 @@ fits its facades too; the full registration and the network decide.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +22,7 @@ from ndt_cli.core.transforms import pose2d_matrix
 from ndt_cli.ndt import bnb_kernels
 from ndt_cli.ndt.bnb import ScoreField, likelihood_field, search_field
 from ndt_cli.ndt.bnb_kernels import SearchKernels
+from ndt_cli.ndt.landmarks import landmarks, triangle_keys
 from ndt_cli.ndt.prepare import PreparedScan
 from ndt_cli.ndt.slicing import voxel_filter_2d
 
@@ -32,11 +34,14 @@ COARSE_WINDOW = 60.0  # m: translations searched, +- around the aligned scene ce
 class Sketch:
     """A scan at a coarse resolution: ``slices[k]`` (n_k, 2) m thinned to one point per pixel,
     and their ``field`` (reduced, levelled frame of the scan); ``to_local``: 4x4 from the
-    scan's own frame to that frame."""
+    scan's own frame to that frame; ``keys``: the triangles of its landmarks, found in its
+    slices before thinning ((m, 3) int64, :func:`~ndt_cli.ndt.landmarks.triangle_keys`;
+    none: kept by an older run)."""
 
     slices: tuple[np.ndarray, ...]
     field: ScoreField
     to_local: np.ndarray
+    keys: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 3), dtype=np.int64))
 
     @property
     def n_points(self) -> int:
@@ -49,7 +54,8 @@ class Sketch:
 def sketch(scan: PreparedScan, resolution: float = COARSE_RESOLUTION) -> Sketch:
     """The :class:`Sketch` of a prepared scan."""
     thin = tuple(voxel_filter_2d(np.reshape(s, (-1, 2)), resolution) for s in scan.slices)
-    return Sketch(thin, likelihood_field(thin, resolution=resolution), scan.to_local())
+    keys = triangle_keys(landmarks(scan.slices))
+    return Sketch(thin, likelihood_field(thin, resolution=resolution), scan.to_local(), keys)
 
 
 @dataclass(frozen=True)

@@ -7,8 +7,8 @@ the network, and :meth:`Campaign.add_scans` updates them in named steps:
 2. **Summarise**: each new scan is read and prepared once (its sketch and preview are kept in
    the link store, so a campaign that resumes does not read it again).
 3. **Discover** (:mod:`ndt_cli.pipeline.discovery`): each new scan registered to its neighbours
-   along the walk or to its best coarse matches (scans out of order), and to the
-   scans near it by known positions (control stations, however coarse), when given.
+   along the walk or to its best coarse matches (out of order), and to the scans near it by
+   known positions (control stations, however coarse), when given.
 4. **Consolidate**: place every scan again by all its links
    (:func:`~ndt_cli.pipeline.placement.replace_all`), plan the network from where the scans
    are (:func:`~ndt_cli.pipeline.network.plan_near`) and register what is missing, until the
@@ -27,12 +27,10 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.linalg import inv
 
 from ndt_cli import io
 from ndt_cli.config.loading import dump
@@ -41,7 +39,8 @@ from ndt_cli.errors import UserInterruptError, caused_by_interrupt
 from ndt_cli.ndt.overlap import CoarseMatch, coarse_match
 from ndt_cli.pipeline import placement
 from ndt_cli.pipeline.by_control import frame_of, home_group, station_links
-from ndt_cli.pipeline.coarse import keyed, match_pairs, partners
+from ndt_cli.pipeline.candidates import LandmarkIndex, shortlists
+from ndt_cli.pipeline.coarse import keyed, match_pairs, partners, seen_from
 from ndt_cli.pipeline.control import matched
 from ndt_cli.pipeline.datum import log_unused_controls
 from ndt_cli.pipeline.discovery import (
@@ -82,6 +81,7 @@ from ndt_cli.pipeline.solution import NetworkSolution, solve
 from ndt_cli.pipeline.walk import Walk
 
 progress = logging.getLogger("ndt_cli.progress")
+Lists = dict[int, list[int]]  # per scan, scans
 
 ROUNDS = 3  # consolidation rounds: place, plan, register
 BRIDGES = 2  # registrations tried between a group and the others, best coarse matches first
@@ -135,6 +135,7 @@ class Campaign:
         self.finished = self.tasks.finished
         self.reused = self.tasks.reused
         self.coarse: dict[Pair, CoarseMatch] = {}
+        self.index = LandmarkIndex()  # the scans' landmarks, for placing them out of order
         self.by_station: set[Pair] = set()  # pairs registered from a station's position once
         self.plan: set[Pair] = set()
         self.where: dict[int, Placed] = {}  # where each placed scan is, roughly
@@ -259,23 +260,31 @@ class Campaign:
                 hinted.append(outcome)
 
     def _place_by_matches(self, todo: list[int]) -> None:
-        """Place ``todo`` all at once: each registered, in one batch, to the scans near it by
-        known positions, or without any, to its best coarse matches among all the scans
-        (:func:`~ndt_cli.pipeline.coarse.partners`: quadratic, so only for those); then every
-        scan placed again by the links. Not one at a time beside the scans placed: a scan
+        """Place ``todo`` all at once, in one batch: each scan registered to the scans near it
+        by known positions, or without any, to its best coarse matches among the scans its
+        landmarks rank first (:func:`~ndt_cli.pipeline.candidates.shortlists`); a scan left
+        alone then to its best among all. Not one at a time beside the scans placed: a scan
         whose neighbours were not placed yet has a wrong best match (a street fits itself
         shifted), and paid five or six registrations before it was alone."""
         every = sorted(set(self.where) | set(todo))
         near = {scan: self._near(scan, [o for o in every if o != scan]) for scan in todo}
+        self.index.update({k: self.summaries[k].sketch.keys for k in every})
         blind = [scan for scan in todo if not near[scan]]
-        wanted = {pair_of(a, b) for a in blind for b in every if a != b} - self.coarse.keys()
+        self._register_to_matches(every, near, shortlists(self.index, blind, every))
+        alone = [s for s in blind if placement.alone(s, self.where)]
+        if alone:
+            progress.info("%d scan(s) placed by no landmark: matched with every scan", len(alone))
+            self._register_to_matches(every, {}, {s: [o for o in every if o != s] for s in alone})
+
+    def _register_to_matches(self, every: list[int], near: Lists, candidates: Lists) -> None:
+        """Register each scan to those ``near`` it and to its best coarse matches among its
+        ``candidates`` (:func:`partners`); then place ``every`` scan again by the links."""
+        wanted = {pair_of(a, b) for a, bs in candidates.items() for b in bs} - self.coarse.keys()
         sketches = {k: self.summaries[k].sketch for k in every}
         self.coarse |= match_pairs(self.executor, sketches, map(self._ordered, wanted))
-        pairs: set[Pair] = set()
-        for scan in todo:
-            others = [o for o in every if o != scan]
-            found = near[scan] or partners(self.coarse, scan, others)
-            pairs |= {pair_of(scan, o) for o in found}
+        pairs = {pair_of(scan, o) for scan, found in near.items() for o in found}
+        for scan, others in candidates.items():
+            pairs |= {pair_of(scan, o) for o in partners(self.coarse, scan, others)}
         self._register([self._planned(p, deep=False) for p in sorted(pairs)])
         self.where = placement.replace_all(every, self.links)
 
@@ -331,11 +340,12 @@ class Campaign:
         in alone, and indoors the extra registrations swayed the joint choice among rivals)
         with scans of other groups are registered, pairs near by known positions first;
         an ok one joins the two groups. The pairs ranked: the group's edge
-        (:func:`~ndt_cli.pipeline.placement.edge`), its neighbours along the walk and by
-        known positions. A round without a join is followed by up to :data:`BRIDGE_ROUNDS` - 1
-        more for the groups of several scans (a piece of the campaign, placed out of order,
-        whose best coarse matches missed), not for a lone scan (a scan that fits nowhere stays
-        alone); after a join, every group has a round again."""
+        (:func:`~ndt_cli.pipeline.placement.edge`) with the scans of other groups (out of
+        order, those its landmarks rank first: :func:`shortlists`), its neighbours along the
+        walk and by known positions. A round without a join is followed by up to
+        :data:`BRIDGE_ROUNDS` - 1 more for the groups of several scans (a piece of the
+        campaign, placed out of order, whose best coarse matches missed), not for a lone scan
+        (a scan that fits nowhere stays alone); after a join, every group has a round again."""
         fresh = set(new)
         failed = 0
         turn = self.trusts_bridges
@@ -349,9 +359,9 @@ class Campaign:
                 near = {pair_of(a, b) for a in group for b in self._near(a, self.where)}
                 walk = {pair_of(a, b) for a in group for b in self.walk.beside(a, HINTS)}
                 hinted = {p for p in walk if p[0] in self.where and p[1] in self.where}
-                edge = {
-                    pair_of(a, b) for a in placement.edge(group, self.links) for b in self.where
-                }
+                outside = [s for s in self.where if s not in mine]
+                ends = shortlists(self.index, placement.edge(group, self.links), outside)
+                edge = {pair_of(a, b) for a, bs in ends.items() for b in bs}
                 cross = [
                     p
                     for p in sorted(edge | near | hinted)
@@ -467,15 +477,13 @@ class Campaign:
         self.tasks.register(planned, both_ways, classic=self.net.classic)
 
     def _match(self, a: int, b: int) -> CoarseMatch:
-        """The coarse match of scan ``b`` on scan ``a`` (cached per pair, computed with the
+        """The coarse match of scan ``b`` on scan ``a`` (computed once per pair, on the
         target :meth:`_ordered` gives)."""
-        pair = pair_of(a, b)
-        if pair not in self.coarse:
-            t, s = self._ordered(pair)
+        t, s = self._ordered(pair_of(a, b))
+        if pair_of(t, s) not in self.coarse:
             m = coarse_match(self.summaries[t].sketch, self.summaries[s].sketch)
-            self.coarse[pair] = keyed(m, t, s)[1]
-        m = self.coarse[pair]
-        return m if a == pair[0] else replace(m, T_target_source=inv(m.T_target_source))
+            self.coarse.update([keyed(m, t, s)])
+        return seen_from(self.coarse, a, b)
 
     @contextmanager
     def _stopping(self) -> Iterator[None]:

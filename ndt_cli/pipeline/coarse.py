@@ -58,6 +58,13 @@ def match_pairs(
     return found
 
 
+def seen_from(matches: Mapping[Pair, CoarseMatch], a: int, b: int) -> CoarseMatch:
+    """The match of scans ``a`` and ``b`` kept in ``matches`` (by (lo, hi)), as the pose of
+    ``b`` on ``a``."""
+    m = matches[pair_of(a, b)]
+    return m if a < b else replace(m, T_target_source=inv(m.T_target_source))
+
+
 def partners(
     matches: Mapping[Pair, CoarseMatch], scan: int, others: Iterable[int], k: int = PARTNERS
 ) -> list[int]:

@@ -183,6 +183,7 @@ class LinkStore:
             "resolution": np.float64(field.resolution),
             "centre": field.centre,
             "to_local": sketch.to_local,
+            "keys": sketch.keys,
             **{f"slice_{k}": s for k, s in enumerate(sketch.slices)},
         }
         if sample is not None:
@@ -213,7 +214,8 @@ class LinkStore:
             slices = tuple(arrays[f"slice_{k}"] for k in range(n))
             f = arrays
             field = ScoreField(f["field"], f["origin"], float(f["resolution"]), f["centre"])
-            sketch = Sketch(slices, field, f["to_local"])
+            keys = f["keys"] if "keys" in f else np.zeros((0, 3), dtype=np.int64)
+            sketch = Sketch(slices, field, f["to_local"], keys)
             return f["preview"], sketch, _sample(arrays, sketch)
         except (KeyError, TypeError, ValueError):
             return None

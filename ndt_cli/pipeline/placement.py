@@ -47,6 +47,12 @@ def placed_groups(where: Where) -> list[dict[int, np.ndarray]]:
     return [g for g in by_group.values() if len(g) > 1]
 
 
+def alone(scan: int, where: Where) -> bool:
+    """Whether ``scan`` is placed in no group with another scan (or not placed)."""
+    group = where[scan].group if scan in where else None
+    return group is None or all(p.group != group for s, p in where.items() if s != scan)
+
+
 def placing_radius(where: Where, radius: float | None) -> float:
     """The radius while placing (m): the option ``radius``, or the default of the scans placed
     so far (the coarse match's window while there are too few)."""
