@@ -4,7 +4,7 @@ matching every pair.
 A scan's **landmarks** are the small objects standing alone in its slices: tree trunks, poles,
 posts, people (:func:`landmarks`). Their horizontal positions, in the scan's reduced,
 levelled frame (m), are the centres of the compact groups of occupied cells with no other
-occupied cell around them. Facades, hedges and parked cars are too long to be one; clutter
+point around them. Facades, hedges and parked cars are too long to be one; clutter
 beside a wall is not alone.
 
 Three landmarks make a triangle whose side lengths do not change when the scan is turned or
@@ -25,7 +25,8 @@ THIN = 0.05  # m: the slices thinned to one point per cell of this first (a 17 M
 # million slice points took 0.3 s, thinned 0.09 s, with nearly all the same landmarks)
 CELL = 0.3  # m: cells of the occupancy image the landmarks are found in
 MAX_EXTENT = 1.2  # m: a landmark's occupied cells fit in a square this wide (a trunk, a pole)
-ALONE = 1.5  # m: no other occupied cell this close to a landmark's own cells
+ALONE = 1.5  # m: no other point this close to a landmark (within this plus half its width
+# of its centre)
 MIN_POINTS = 3  # thinned points a landmark needs in a slice
 MERGE = 0.5  # m: landmarks of different slices closer than this are one
 MOST = 200  # landmarks kept per scan, nearest the scanner first (triangles grow as n^3)

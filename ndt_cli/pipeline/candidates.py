@@ -36,9 +36,6 @@ class LandmarkIndex:
         self.holders: dict[int, set[int]] = defaultdict(set)
         self.update(keys or {})
 
-    def __contains__(self, scan: int) -> bool:
-        return scan in self.keys
-
     def update(self, keys: Mapping[int, np.ndarray]) -> None:
         """:meth:`add` each scan of ``keys``."""
         for scan, k in keys.items():
