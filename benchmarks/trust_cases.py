@@ -112,9 +112,9 @@ def cached(
     folder = CACHE / f"{prefix}{world.seed}_{key.hexdigest()[:12]}"
     poses_file = folder / "poses.npy"
     if poses_file.exists():
-        files = sorted(folder.glob("scan_*.las"))
         poses = list(np.load(poses_file))
-        if len(files) == len(poses):
+        files = [folder / f"scan_{k:02d}.las" for k in range(len(poses))]  # in the poses' order
+        if all(f.exists() for f in files):
             return files, poses
     folder.mkdir(parents=True, exist_ok=True)
     print(f"  simulating {world.describe()} ...", flush=True)
