@@ -335,11 +335,12 @@ class Campaign:
     def _bridge(self, new: list[int]) -> None:
         """Join the groups of placed scans where they overlap: for each group but the
         largest, its :data:`BRIDGES` best coarse matches (pairs with a new scan, not tried
-        yet; where a bridge is trusted, also those tried one way round while placing and
-        marginal, since the other way round may pass: where none is, such a link ties no scan
-        in alone, and indoors the extra registrations swayed the joint choice among rivals)
-        with scans of other groups are registered, pairs near by known positions first;
-        an ok one joins the two groups. The pairs ranked: the group's edge
+        yet) with scans of other groups are registered, pairs near by known positions first;
+        an ok one joins the two groups. Only where a bridge is trusted is a marginal one
+        registered the other way round too, and one tried one way round while placing, as
+        the other way may pass: where none is, such a link ties no scan in alone (out of
+        order, half the bridges' registrations), and indoors the extra registrations swayed
+        the joint choice among rivals. The pairs ranked: the group's edge
         (:func:`~ndt_cli.pipeline.placement.edge`) with the scans of other groups (out of
         order, those its landmarks rank first: :func:`shortlists`), its neighbours along the
         walk and by known positions. A round without a join is followed by up to
@@ -373,7 +374,7 @@ class Campaign:
                 pairs += [p for p in cross[:BRIDGES] if p not in pairs]
             if not pairs:
                 return
-            self._register([self._planned(p, deep=False) for p in pairs], both_ways=True)
+            self._register([self._planned(p, deep=False) for p in pairs], both_ways=turn)
             joined = [placement.join(p, self.links, self.where) for p in pairs]
             failed = 0 if any(joined) else failed + 1
 
@@ -433,8 +434,7 @@ class Campaign:
         and was doubted by the free space (:class:`~ndt_cli.ndt.result.Deeper`): placement's
         probes leave that to the pairs of the plan. Whether one of them became ok."""
         links = self.links
-        again = [p for p in sorted(pairs) if p in links and links[p].skipped_deeper]
-        again = [p for p in again if not links[p].ok]
+        again = [p for p in sorted(pairs) if (k := links.get(p)) and k.skipped_deeper and not k.ok]
         self.tasks.register_anew([self._planned(p) for p in again])
         return any(self.links[p].ok for p in again)
 
