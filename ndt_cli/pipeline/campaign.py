@@ -25,6 +25,7 @@ chain in the order given.
 from __future__ import annotations
 
 import logging
+from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -87,7 +88,7 @@ ROUNDS = 3  # consolidation rounds: place, plan, register
 BRIDGES = 2  # registrations tried between a group and the others, best coarse matches first
 PROBES = 2  # placed scans nearest to a prediction that a scan is registered to, to test it
 ATTEMPTS = 2  # distinct predictions of a scan's place tried by full registrations
-BRIDGE_ROUNDS = 3  # rounds in a row without a join before the groups are left apart
+BRIDGE_ROUNDS = 3  # rounds without a join before a group of several scans is left apart
 
 
 class Campaign:
@@ -343,20 +344,19 @@ class Campaign:
         the joint choice among rivals. The pairs ranked: the group's edge
         (:func:`~ndt_cli.pipeline.placement.edge`) with the scans of other groups (out of
         order, those its landmarks rank first: :func:`shortlists`), its neighbours along the
-        walk and by known positions. A round without a join is followed by up to
-        :data:`BRIDGE_ROUNDS` - 1 more for the groups of several scans (a piece of the
-        campaign, placed out of order, whose best coarse matches missed), not for a lone scan
-        (a scan that fits nowhere stays alone); after a join, every group has a round again."""
-        fresh = set(new)
-        failed = 0
-        turn = self.trusts_bridges
-        while failed < BRIDGE_ROUNDS:
-            groups = placement.groups(self.where)
+        walk and by known positions. A group of several scans has :data:`BRIDGE_ROUNDS`
+        rounds without a join (a piece placed out of order whose best coarse matches missed),
+        a lone scan one (a scan that fits nowhere stays alone); a group that joins another is
+        a new group (a join elsewhere changes none of a group's candidates)."""
+        fresh, turn = set(new), self.trusts_bridges
+        failed: Counter[frozenset[int]] = Counter()  # rounds each group had without a join
+        while True:
             pairs: list[Pair] = []
-            for group in groups[1:]:
-                if failed and len(group) == 1:
+            for group in placement.groups(self.where)[1:]:
+                mine = frozenset(group)
+                if failed[mine] >= (1 if len(group) == 1 else BRIDGE_ROUNDS):
                     continue
-                mine = set(group)
+                failed[mine] += 1  # a group that joins is another group: rounds of its own
                 near = {pair_of(a, b) for a in group for b in self._near(a, self.where)}
                 walk = {pair_of(a, b) for a in group for b in self.walk.beside(a, HINTS)}
                 hinted = {p for p in walk if p[0] in self.where and p[1] in self.where}
@@ -375,8 +375,8 @@ class Campaign:
             if not pairs:
                 return
             self._register([self._planned(p, deep=False) for p in pairs], both_ways=turn)
-            joined = [placement.join(p, self.links, self.where) for p in pairs]
-            failed = 0 if any(joined) else failed + 1
+            for p in pairs:
+                placement.join(p, self.links, self.where)
 
     def _place_by_stations(self) -> bool:
         """Scans with a station outside the group of most stations, registered from where
