@@ -153,7 +153,7 @@ def scan_shuffled_route(world: ShuffledRoute) -> tuple[object, list, list[np.nda
 
 def routes(quick: bool) -> list[ShuffledRoute]:
     """Shuffled routes: 16 scans (the reduced tier), then 32, 64, 96 and 128 (the
-    benchmark's route, where placing by every pair's coarse match left scans ok and wrong)."""
+    benchmark's route)."""
     first = [ShuffledRoute(3, 16, 2)]
     more = [ShuffledRoute(7, 32, 3), ShuffledRoute(5, 64, 1), ShuffledRoute(9, 96, 2)]
     return first if quick else [*first, *more, ShuffledRoute(5, 128, 1)]
