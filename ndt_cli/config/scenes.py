@@ -35,6 +35,9 @@ INDOOR: dict[str, Any] = {
     "quality.max_ambiguity": 0.5,
     # one registration alone proves nothing where rooms repeat: a scan is ok only on a cycle
     "quality.trust_bridges": False,
+    # the halves of a symmetric floor: two weak links (each kept with 19-49 % of the evidence
+    # of a pose the free space refuted) agreed on the far half turned by 180 degrees
+    "quality.weak_links_join": False,
     # right poses of simulated interiors put at most 0.15 % of the points into free space, the
     # wrong ones that no rival named 0.6-4 % (a real robot's room scans put 2 % there: suspect)
     "quality.max_free_space_around": 0.005,

@@ -338,6 +338,20 @@ class QualityConfig:
         "where a room repeated along a corridor makes a single registration wrong without a "
         "sign)",
     )
+    weak_links_join: bool = key(
+        True,
+        "a link kept with less than min_kept_evidence of the evidence of a pose the free space "
+        "refuted may join two groups of scans in the choice among rivals; false (interiors): "
+        "it is only checked within a group (two such links 25 and 34 m long agreed on an office "
+        "floor's far half turned by 180 degrees, and its scans were ok and wrong)",
+    )
+    trust_walk_bridges: bool = key(
+        True,
+        "with trust_bridges false, a bridge between neighbours along the walk (scans taken one "
+        "after the other) may still tie a scan in on its own gate's word: the walk vouches for "
+        "them, as it does outdoors; the wrong links that a gate passed indoors were between "
+        "scans 13-26 m apart that the walk did not pair; false: no bridge at all",
+    )
 
 
 @dataclass(frozen=True)

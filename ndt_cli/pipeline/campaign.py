@@ -61,6 +61,7 @@ from ndt_cli.pipeline.link_runner import LinkRunner
 from ndt_cli.pipeline.links import Link, LinkStore
 from ndt_cli.pipeline.members import Members, network_links
 from ndt_cli.pipeline.network import (
+    Bridges,
     LinkKind,
     Pair,
     PlannedLink,
@@ -130,8 +131,7 @@ class Campaign:
             on_link=on_link,
         )
         # what the tasks gave (owned by the runner): summaries, unreadable scans, links
-        self.summaries = self.tasks.summaries
-        self.unreadable = self.tasks.unreadable
+        self.summaries, self.unreadable = self.tasks.summaries, self.tasks.unreadable
         self.links = self.tasks.links
         self.finished = self.tasks.finished
         self.reused = self.tasks.reused
@@ -152,8 +152,7 @@ class Campaign:
         return self.report(len(self.paths) - 1, self.result())
 
     def add_scans(self, paths: Sequence[str | Path]) -> None:
-        """Add scans (in campaign order) and update the network: admit, summarise, discover,
-        consolidate (the solve is :meth:`result`)."""
+        """Add scans (in campaign order): admit, summarise, discover, bridge, consolidate."""
         with self._stopping():
             new = self._admit(paths)
             self.tasks.summarise(new)
@@ -180,7 +179,7 @@ class Campaign:
             matched(self.net.stations, names),
             self.net.grid_scale,
             self.cfg.quality.max_ambiguity,
-            self.trusts_bridges,
+            self.bridges,
             members.checked_only,
         )
         log_unused_controls(solution.datum)
@@ -201,9 +200,10 @@ class Campaign:
         )
 
     @property
-    def trusts_bridges(self) -> bool:
-        """Whether a link on no cycle may tie a scan in (``quality.trust_bridges``, walked)."""
-        return self.cfg.quality.trust_bridges and self.walked
+    def bridges(self) -> Bridges:
+        """Which links on no cycle may tie a scan in (:meth:`Bridges.of`)."""
+        q = self.cfg.quality
+        return Bridges.of(q.trust_bridges, q.trust_walk_bridges, self.walked)
 
     def _world_system(self, solution: NetworkSolution) -> dict[str, Any]:
         """The control's stations and coordinate system, and the grid scale when applied."""
@@ -337,18 +337,16 @@ class Campaign:
         """Join the groups of placed scans where they overlap: for each group but the
         largest, its :data:`BRIDGES` best coarse matches (pairs with a new scan, not tried
         yet) with scans of other groups are registered, pairs near by known positions first;
-        an ok one joins the two groups. Only where a bridge is trusted is a marginal one
-        registered the other way round too, and one tried one way round while placing, as
-        the other way may pass: where none is, such a link ties no scan in alone (out of
-        order, half the bridges' registrations), and indoors the extra registrations swayed
-        the joint choice among rivals. The pairs ranked: the group's edge
-        (:func:`~ndt_cli.pipeline.placement.edge`) with the scans of other groups (out of
-        order, those its landmarks rank first: :func:`shortlists`), its neighbours along the
-        walk and by known positions. A group of several scans has :data:`BRIDGE_ROUNDS`
-        rounds without a join (a piece placed out of order whose best coarse matches missed),
-        a lone scan one (a scan that fits nowhere stays alone); a group that joins another is
-        a new group (a join elsewhere changes none of a group's candidates)."""
-        fresh, turn = set(new), self.trusts_bridges
+        an ok one joins the two groups. Only where every bridge is trusted is a marginal one
+        (or one tried while placing) registered the other way round too: elsewhere such a
+        link ties no scan in alone (out of order, half the bridges' registrations), and
+        indoors the extra registrations swayed the choice among rivals. The pairs ranked: the
+        group's edge (:func:`~ndt_cli.pipeline.placement.edge`) with the scans of other groups
+        (out of order, those its landmarks rank first: :func:`shortlists`), its walk and
+        position neighbours. A group of several scans has :data:`BRIDGE_ROUNDS` rounds
+        without a join, a lone scan one; a group that joins another is a new group (a join
+        elsewhere changes none of a group's candidates)."""
+        fresh, turn = set(new), self.bridges is Bridges.ALL
         failed: Counter[frozenset[int]] = Counter()  # rounds each group had without a join
         while True:
             pairs: list[Pair] = []
@@ -403,8 +401,7 @@ class Campaign:
         if self.net.stations:
             found = matched(self.net.stations, scan_names(self.paths))
             return {c.scan: (c.xyz[:2], c.sigma_xy) for c in found}
-        sigma = self.net.init_sigma[0]
-        n = len(self.paths)
+        n, sigma = len(self.paths), self.net.init_sigma[0]
         return {k: (T[:2, 3], sigma) for k, T in self.net.init_poses.items() if k < n}
 
     def _near(self, scan: int, candidates: Iterable[int]) -> list[int]:
@@ -453,7 +450,10 @@ class Campaign:
     def _network(self) -> Members:
         """The links of the result (:func:`~ndt_cli.pipeline.members.network_links`)."""
         classic = (len(self.paths), self.unreadable) if self.net.classic else None
-        return network_links(self.links, self.plan, self.net.given, self.walk.adjacent, classic)
+        weak = 0.0 if self.cfg.quality.weak_links_join else self.cfg.quality.min_kept_evidence
+        return network_links(
+            self.links, self.plan, self.net.given, self.walk.adjacent, classic, weak
+        )
 
     def _user_todo(self) -> list[PlannedLink]:
         n = len(self.paths)

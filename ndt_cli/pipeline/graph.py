@@ -26,7 +26,9 @@ class Edge:
     """A link: ``T_target_source`` (4x4, reduced frames, ``p_target = T @ p_source``) and its
     6x6 ``covariance`` (right perturbation, source body frame; rad and m). ``trusted``: the
     link's own quality gate passed (ok status). ``horizontal`` False: the link says nothing
-    of where its scans are horizontally (degenerate; its rotation and height count)."""
+    of where its scans are horizontally (degenerate; its rotation and height count).
+    ``walked``: it joins neighbours along the walk (scans taken one after the other), whose
+    gate's word may stand where no other bridge's does (``quality.trust_walk_bridges``)."""
 
     target: int
     source: int
@@ -34,6 +36,7 @@ class Edge:
     covariance: np.ndarray
     trusted: bool = True
     horizontal: bool = True
+    walked: bool = False
 
     def __post_init__(self) -> None:
         T = np.asarray(self.T_target_source, dtype=float)

@@ -43,6 +43,7 @@ def network_links(
     user: Collection[Pair],
     adjacent: Collection[Pair],
     classic: tuple[int, Collection[int]] | None = None,
+    weak: float = 0.0,
 ) -> Members:
     """The links of the network among the ``registered`` ones (by pair): the ``plan``, the
     ``user``'s pairs, every link its gate passed, every firm link determined in every
@@ -50,7 +51,9 @@ def network_links(
     link connects (so that the outputs say why), and, to be checked only, every other link
     with rivals. ``classic``: (number of scans, unreadable scans) for the classic chain, whose
     network is the chain in the order given and the user's pairs. ``adjacent``: neighbours
-    along the walk (:func:`~ndt_cli.pipeline.network.kind_of`)."""
+    along the walk (:func:`~ndt_cli.pipeline.network.kind_of`). A link kept with less than
+    ``weak`` of the most evidence of its candidates (a pose the free space refuted had more)
+    is only checked too (``quality.weak_links_join`` false: ``quality.min_kept_evidence``)."""
     if classic is not None:
         pairs = {k.pair for k in classic_chain(*classic)} | set(user)
         checked: set[Pair] = set()
@@ -61,9 +64,18 @@ def network_links(
         pairs = set(plan) | set(user) | lonely | sure
         checked = {p for p, k in registered.items() if contested(k)} - pairs
         pairs |= checked
+        checked |= {p for p in pairs if p in registered and kept_share(registered[p]) < weak}
     chosen = sorted(p for p in pairs if p in registered)
     links = [
         replace(registered[p], index=n, kind=kind_of(p, user, adjacent))
         for n, p in enumerate(chosen)
     ]
     return Members(links, frozenset(n for n, p in enumerate(chosen) if p in checked))
+
+
+def kept_share(link: Link) -> float:
+    """The kept pose's evidence over the most of any of the link's candidates (1: the pose of
+    most evidence was kept, or the link has no candidates)."""
+    found = () if link.result is None else link.result.candidates
+    most = max((c.evidence for c in found), default=0.0)
+    return found[0].evidence / most if most > 0.0 else 1.0

@@ -38,6 +38,23 @@ class LinkKind(StrEnum):
     USER = "user"  # listed by the user (--pairs)
 
 
+class Bridges(StrEnum):
+    """Which links on no cycle (bridges of the network) may tie a scan in on their own
+    gate's word."""
+
+    ALL = "all"  # every one its gate passed (a walk outdoors)
+    WALK = "walk"  # those between neighbours along the walk (:attr:`LinkKind.ADJACENT`)
+    NONE = "none"  # none: every ok scan lies on a cycle of links that agree
+
+    @classmethod
+    def of(cls, trust_bridges: bool, trust_walk_bridges: bool, walked: bool) -> Bridges:
+        """The bridges trusted by ``quality.trust_bridges`` and ``quality.trust_walk_bridges``
+        in a campaign that ``walked`` (its order proved a hint); out of order, none."""
+        if not walked:
+            return cls.NONE
+        return cls.ALL if trust_bridges else cls.WALK if trust_walk_bridges else cls.NONE
+
+
 @dataclass(frozen=True)
 class PlannedLink:
     """A pair to register: ``source`` onto ``target`` (scan indices), why, a guess of

@@ -30,7 +30,7 @@ from ndt_cli.pipeline.datum import Cluster, Datum, datum
 from ndt_cli.pipeline.graph import Edge, EdgeResidual
 from ndt_cli.pipeline.hypotheses import Choice, Hypothesis, choose
 from ndt_cli.pipeline.links import Link
-from ndt_cli.pipeline.network import LinkKind
+from ndt_cli.pipeline.network import Bridges, LinkKind
 from ndt_cli.pipeline.verify import (
     EdgeState,
     EdgeVerdict,
@@ -182,7 +182,7 @@ def solve(
     controls: Sequence[Control] = (),
     grid_scale: float = 1.0,
     ambiguity: float = 0.95,
-    trust_bridges: bool = True,
+    bridges: Bridges = Bridges.ALL,
     checked_only: Collection[int] = frozenset(),
 ) -> NetworkSolution:
     """The pose and status of every scan, and the state of every link; with the adjustment,
@@ -190,12 +190,13 @@ def solve(
     coordinate system of the ``controls``, whose grid distance over ground is ``grid_scale``).
     ``ambiguity``: the share of evidence that makes a second placement of two groups a rival
     of the first (``quality.max_ambiguity``; :mod:`ndt_cli.pipeline.hypotheses`);
-    ``trust_bridges``: a link on no cycle may tie a scan in (``quality.trust_bridges``);
+    ``bridges``: which links on no cycle may tie a scan in (:class:`~ndt_cli.pipeline.network.
+    Bridges`: ``quality.trust_bridges``, ``quality.trust_walk_bridges``);
     ``checked_only``: the ambiguous links (by index) that may only be chosen where firm links
     tie their scans together (:mod:`ndt_cli.pipeline.members`)."""
     plain = tuple(chained(n_scans, links, anchor, {LinkKind.ADJACENT}))
     if adjust:
-        judging = (ambiguity, trust_bridges, frozenset(checked_only))
+        judging = (ambiguity, bridges, frozenset(checked_only))
         return _adjusted(n_scans, anchor, links, unreadable, plain, controls, grid_scale, judging)
     poses = chained(n_scans, links, anchor, set(LinkKind))
     scans = tuple(
@@ -229,7 +230,7 @@ def _adjusted(
     plain: tuple[np.ndarray | None, ...],
     controls: Sequence[Control] = (),
     grid_scale: float = 1.0,
-    judging: tuple[float, bool, frozenset[int]] = (0.95, True, frozenset()),
+    judging: tuple[float, Bridges, frozenset[int]] = (0.95, Bridges.ALL, frozenset()),
 ) -> NetworkSolution:
     """Verify and adjust the network of usable links, set it in the world; map nodes and edges
     back. Links with rivals stay out of the consensus: the poses chosen among theirs join the
@@ -273,28 +274,34 @@ def _network(
     anchor: int,
     links: Sequence[Link],
     ambiguity: float,
-    trust_bridges: bool,
+    bridges: Bridges,
     checked_only: frozenset[int],
 ) -> _Network:
     """Verify the firm links (usable, without rivals), choose among the poses of the links
-    with rivals, and of the firm links that only bridges would keep, against them
-    (:mod:`ndt_cli.pipeline.hypotheses`), and verify the firm and chosen links together."""
+    with rivals, of the firm links that only bridges would keep and of the weak ones (firm
+    but only checked: they place no scan in a group), against them
+    (:mod:`ndt_cli.pipeline.hypotheses`), and verify the firm and chosen links together. The
+    walk's bridges (``bridges`` WALK) count in that last verification only (trust.md §6)."""
     usable_ids = [k for k, link in enumerate(links) if usable(link)]
-    firm_ids = [k for k in usable_ids if firm(links[k])]
+    # a degenerate link says nothing of where its scans are horizontally: it decides nothing
+    decided = [k for k in usable_ids if links[k].status is not Status.DEGENERATE]
+    weak = {k for k in decided if k in checked_only and firm(links[k])}
+    firm_ids = [k for k in usable_ids if firm(links[k]) and k not in weak]
+    walk, trust_bridges = bridges is Bridges.WALK, bridges is Bridges.ALL
     edges = [_edge(links[k]) for k in firm_ids]
     v = verify(n_scans, anchor, edges, trust_bridges=trust_bridges)
     loose = {firm_ids[i] for i, e in enumerate(v.edges) if _unchecked(e)}
-    # a degenerate link says nothing of where its scans are horizontally: it decides nothing
-    decided = [k for k in usable_ids if links[k].status is not Status.DEGENERATE]
     hyps = {k: _hypotheses(links[k], k) for k in decided if links[k].result.rivals}
-    hyps.update({k: [Hypothesis(k, 0, _edge(links[k]), 1.0)] for k in loose if k in decided})
+    single = (loose & set(decided)) | weak
+    hyps.update({k: [Hypothesis(k, 0, _edge(links[k]), 1.0)] for k in single})
     groups, poses = [n.cluster for n in v.nodes], [n.pose for n in v.nodes]
     choices = choose(groups, poses, hyps, v.threshold, ambiguity, checked_only)
     chosen = sorted(k for k, c in choices.items() if c.chosen is not None)
-    if chosen:
-        used = [k for k in firm_ids if k not in loose] + chosen
+    if chosen or walk:
+        kept = firm_ids if walk else [k for k in firm_ids if k not in loose]
+        used = kept + [k for k in chosen if k not in kept]
         firm_set = set(firm_ids)
-        edges = [_edge(links[k]) if k in firm_set else choices[k].chosen.edge for k in used]
+        edges = [_edge(links[k], walk) if k in firm_set else choices[k].chosen.edge for k in used]
         v = verify(n_scans, anchor, edges, trust_bridges=trust_bridges)
     else:
         used = firm_ids
@@ -314,7 +321,7 @@ def _why_left(link: Link) -> str:
     rivals = link.result.rivals
     if rivals:
         return "rival " + "; ".join(r.text for r in rivals) + "; the network could not choose"
-    return "no cycle of links checks it, and no bridge is trusted here"
+    return "no cycle of links checks it, and such a bridge is not trusted here"
 
 
 def _fits(links: Sequence[Link], net: _Network) -> tuple[LinkFit, ...]:
@@ -333,12 +340,13 @@ def _fits(links: Sequence[Link], net: _Network) -> tuple[LinkFit, ...]:
     return tuple(fits)
 
 
-def _edge(link: Link) -> Edge:
-    """A link's kept pose as an edge of the pose graph (between the reduced frames)."""
+def _edge(link: Link, walk: bool = False) -> Edge:
+    """A link's kept pose as an edge (reduced frames), ``walk``: marked if a walk's link."""
     r = link.result
     flat = link.status is Status.DEGENERATE  # where its scans are horizontally: unknown
     T, cov = r.T_reduced, link_covariance(r)
-    return Edge(link.target, link.source, T, cov, trusted=link.ok, horizontal=not flat)
+    walked = walk and link.kind is LinkKind.ADJACENT
+    return Edge(link.target, link.source, T, cov, link.ok, horizontal=not flat, walked=walked)
 
 
 def _hypotheses(link: Link, k: int) -> list[Hypothesis]:

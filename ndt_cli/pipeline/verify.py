@@ -264,12 +264,21 @@ class _Verifier:
         return self._chi2(k) / (TRUST if self.edges[k].trusted else 1.0)
 
     def drop_untrusted_bridges(self, trust_bridges: bool = True) -> set[int]:
-        """Kept bridges whose own gate failed (every bridge, unless ``trust_bridges``) leave
-        the kept set (they cannot be checked); returns them."""
+        """Kept bridges whose own gate failed (every bridge, unless ``trust_bridges`` or it
+        joins neighbours along the walk: :attr:`Edge.walked`) leave the kept set (they cannot
+        be checked); returns them."""
         free = uncheckable(self.solver.n, self.edges, sorted(self.kept))
-        weak = {k for k in free if not (trust_bridges and self.edges[k].trusted)}
+        edges = self.edges
+        weak = {k for k in free if not (edges[k].trusted and (trust_bridges or edges[k].walked))}
         self.kept -= weak
         return weak
+
+    def _untrusted(self) -> str:
+        """Why a bridge its gate passed is not kept: no bridge is trusted, or (where some
+        link joins neighbours along the walk) only those that do."""
+        if any(e.walked for e in self.edges):
+            return "only a bridge between neighbours along the walk is trusted"
+        return "no bridge is trusted"
 
     def states(self, unchecked: set[int]) -> list[tuple[EdgeState, str]]:
         """Final state and reason of every edge."""
@@ -279,7 +288,7 @@ class _Verifier:
             if k in self.rejected:
                 out.append((EdgeState.REJECTED, self.rejected[k]))
             elif k in unchecked:
-                why = "its own gate failed" if not self.edges[k].trusted else "no bridge is trusted"
+                why = "its own gate failed" if not self.edges[k].trusted else self._untrusted()
                 text = (
                     f"a bridge (on no cycle of kept links that checks it) and {why}: not checkable"
                 )
