@@ -42,6 +42,10 @@ MATRIX = re.compile(r"m[0-3][0-3]")  # the columns of a pose's 4x4
 NOT_PINNED = {"runtime_s", "iterations", "iterations_per_level", "ambiguity"}
 SEARCH = {"score", "score_per_point", "hessian_eigenvalues"}  # NDT levels' outcome: within 1 %
 SEARCH_TOLERANCE = 0.01
+# shares of the points in free space: a few points at the edges of what a scanner saw move with
+# the CPU's floating-point path (0.0123 to 0.0125 of a pair's points between two machines)
+FREE_SPACE = {"free_space", "free_space_around", "free_space_second"}
+FREE_SPACE_TOLERANCE = 5e-4
 
 
 def _step(text: str) -> float:
@@ -79,6 +83,10 @@ def _same_table(path: Path, golden: Path) -> None:
             relative = SEARCH_TOLERANCE if column in SEARCH else 0.0
             rounded = not MATRIX.fullmatch(column)  # a pose's 4x4 is printed in full
             where = f"{path.name} row {k + 1} {column}"
+            if column in FREE_SPACE and row[column] != value:
+                got, want_share = float(row[column]), float(value)
+                assert abs(got - want_share) <= FREE_SPACE_TOLERANCE, f"{where}: {got} != {value}"
+                continue
             _same(row[column], value, where, rounded, relative)
 
 
