@@ -86,6 +86,16 @@ class WatchRun:
             time.sleep(0.1)
         assert done(self.events), f"not seen within {limit} s:\n{self.stderr()}"
 
+    def wait_for_screen(self, text: str, limit: float = 120.0) -> None:
+        """Until ``text`` is on the screen (stderr), or the process ended, or ``limit`` s
+        passed."""
+        deadline = time.monotonic() + limit
+        while time.monotonic() < deadline and self.proc.poll() is None:
+            if text in self.stderr():
+                return
+            time.sleep(0.1)
+        assert text in self.stderr(), f"{text!r} not seen within {limit} s:\n{self.stderr()}"
+
     def wait(self, limit: float) -> int:
         try:
             return self.proc.wait(timeout=limit)

@@ -284,9 +284,9 @@ def test_the_watched_folder_gone_and_back_is_said(tmp_path):
     card = tmp_path / "card"
     card.mkdir()
     run = start_watch(card, tmp_path / "out", tmp_path / "log", "--exit-when-idle", "5")
-    time.sleep(2.5)
+    run.wait_for_screen("ndt-watch: watching")  # the watch began: the folder was there
     card.rmdir()
-    time.sleep(1.5)
+    run.wait_for_screen("cannot be read (card pulled out?)")
     card.mkdir()
     assert run.wait(60) == 1
     text = run.stderr()
