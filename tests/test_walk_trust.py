@@ -5,6 +5,7 @@ bridge may, and a walk neighbour's link on a cycle is judged by its cycle."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from test_adjust import measured, street
 
 from ndt_cli.config import Config
@@ -73,3 +74,44 @@ def test_which_bridges_a_campaign_trusts():
     assert all(Bridges.of(a, b, walked=False) is Bridges.NONE for a in (0, 1) for b in (0, 1))
     indoor = for_scene(Config(), "indoor").quality
     assert indoor.trust_bridges is False and indoor.trust_walk_bridges is True
+
+
+def _walk_with_strangers(folder) -> list:
+    """A route's first scan, then six scans of six other streets (each fits no scan), then
+    the route's second scan: the order a walk has where most scans fit nowhere."""
+    from ndt_cli import sim
+
+    route = sim.write_survey(sim.route(seed=3, n_scans=2, rays=(1000, 120)), folder / "route")
+    strangers = [
+        sim.write_survey(sim.route(seed=60 + k, n_scans=1, rays=(1000, 120)), folder / f"x{k}")[0]
+        for k in range(6)
+    ]
+    return [route[0], *strangers, *route[1:]]
+
+
+def _walked(files, cfg: Config, out) -> bool:
+    """Whether the campaign still follows its order once every file was placed."""
+    from ndt_cli.pipeline.campaign import Campaign
+    from ndt_cli.pipeline.local_pool import WorkerPool
+
+    campaign = Campaign(cfg, out, WorkerPool(2), anchor=0)
+    try:
+        new = campaign._admit(files)
+        campaign.tasks.summarise(new)
+        campaign._discover(new)
+        return campaign.walked
+    finally:
+        campaign.close()
+
+
+@pytest.mark.slow
+def test_scans_that_fit_nowhere_doubt_the_walk_only_where_unplaced_doubt_walk(tmp_path):
+    """Outdoors six scans in a row that fit no scan are as many misses of the order: the
+    campaign stops following it (and then trusts no bridge). Where they count neither way
+    (``scene.unplaced_doubt_walk`` false, interiors: a room seen only through its doorway
+    fits no scan), the same files leave the walk a hint."""
+    files = _walk_with_strangers(tmp_path)
+    assert _walked(files, Config(), tmp_path / "street") is False
+    cfg = Config().replace(scene={"unplaced_doubt_walk": False})
+    assert _walked(files, cfg, tmp_path / "indoor") is True
+    assert for_scene(Config(), "indoor").scene.unplaced_doubt_walk is False

@@ -18,6 +18,9 @@ from ndt_cli.config.schema import Config, from_dict
 INDOOR: dict[str, Any] = {
     # skip links too: every scan on a cycle (bridges are not trusted indoors, below)
     "scene.radius_factor": 3.0,
+    # a room seen only through its doorway fits no scan: no sign the walk's order is wrong
+    # (counted against it, most floors were judged no walk, and then no bridge is trusted)
+    "scene.unplaced_doubt_walk": False,
     # below any ceiling; 0.5 m cuts desks and chairs, 1-2 m walls, doors, shelves, columns
     "slices.heights": [0.5, 1.0, 1.5, 2.0],
     "slices.thickness": 0.2,  # door jambs and pilasters are 0.1-0.2 m deep

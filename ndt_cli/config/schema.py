@@ -47,6 +47,12 @@ class SceneConfig:
         "between nearest scans (the --radius option overrides it); indoors 3: interiors need "
         "cycles of links, since one registration alone proves nothing where rooms repeat",
     )
+    unplaced_doubt_walk: bool = key(
+        True,
+        "a scan that fits no placed scan at all counts against following the campaign's "
+        "order, as a scan the order placed wrongly does; false (interiors): it counts neither "
+        "way, since a room seen only through its doorway fits no scan in a right walk",
+    )
 
 
 @dataclass(frozen=True)

@@ -291,12 +291,12 @@ class Campaign:
 
     def _place(self, scan: int) -> bool | None:
         """Place the scan: first by its neighbours along the walk (the scan before it, the
-        best coarse match among them and those that agree with it are registered); without an
-        ok link, by every placed scan: the best coarse prediction, registered to the
-        :data:`PROBES` placed scans nearest to it, then the next distinct one, up to
-        :data:`ATTEMPTS`. Scans near it by known positions (control stations) are registered
-        in the first step too. Nothing fits: a group of its own, for now. Returns whether the
-        order hint placed it (None: no hint, or no neighbour placed)."""
+        best coarse match among them and those that agree with it are registered) and the
+        scans near it by known positions (control stations); without an ok link, by every placed
+        scan: the best coarse prediction, registered to the :data:`PROBES` placed scans nearest
+        to it, then the next distinct one, up to :data:`ATTEMPTS`. Nothing fits: a group of its
+        own, for now. Returns whether the order hint placed it (None: no hint, no neighbour
+        placed, or nothing fits and ``scene.unplaced_doubt_walk`` is false)."""
         where = self.where
         around = self.walk.beside(scan, HINTS)
         hinted = consensus(predict(scan, around, where, self._match))
@@ -331,7 +331,7 @@ class Campaign:
             if placement.settle(scan, self.links, self.where):
                 return missed
         where[scan] = Placed(scan, np.eye(4))
-        return missed
+        return missed if self.cfg.scene.unplaced_doubt_walk else None
 
     def _bridge(self, new: list[int]) -> None:
         """Join the groups of placed scans where they overlap: for each group but the
