@@ -50,8 +50,9 @@ class SceneConfig:
     unplaced_doubt_walk: bool = key(
         True,
         "a scan that fits no placed scan at all counts against following the campaign's "
-        "order, as a scan the order placed wrongly does; false (interiors): it counts neither "
-        "way, since a room seen only through its doorway fits no scan in a right walk",
+        "order, as a scan that fits elsewhere than beside its neighbours in the order does; "
+        "false (interiors): it counts neither way, since a room seen only through its doorway "
+        "fits no scan in a right walk",
     )
 
 
