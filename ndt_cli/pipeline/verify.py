@@ -269,9 +269,9 @@ class _Verifier:
         be checked); returns them."""
         free = uncheckable(self.solver.n, self.edges, sorted(self.kept))
         edges = self.edges
-        weak = {k for k in free if not (edges[k].trusted and (trust_bridges or edges[k].walked))}
-        self.kept -= weak
-        return weak
+        out = {k for k in free if not (edges[k].trusted and (trust_bridges or edges[k].walked))}
+        self.kept -= out
+        return out
 
     def _untrusted(self) -> str:
         """Why a bridge its gate passed is not kept: no bridge is trusted, or (where some
@@ -283,12 +283,13 @@ class _Verifier:
     def states(self, unchecked: set[int]) -> list[tuple[EdgeState, str]]:
         """Final state and reason of every edge."""
         free = uncheckable(self.solver.n, self.edges, sorted(self.kept))
+        untrusted = self._untrusted()
         out = []
         for k in range(len(self.edges)):
             if k in self.rejected:
                 out.append((EdgeState.REJECTED, self.rejected[k]))
             elif k in unchecked:
-                why = "its own gate failed" if not self.edges[k].trusted else self._untrusted()
+                why = "its own gate failed" if not self.edges[k].trusted else untrusted
                 text = (
                     f"a bridge (on no cycle of kept links that checks it) and {why}: not checkable"
                 )
