@@ -167,7 +167,7 @@ def test_a_link_without_rivals_and_determined_everywhere_is_one_a_cycle_can_chec
     """The network holds such a link even when its gate doubted it and the plan did not pair
     it; one with rivals, a weak direction or refuted by its data it does not."""
     from ndt_cli.ndt.result import Rival, Status
-    from ndt_cli.pipeline.solution import determined, firm
+    from ndt_cli.pipeline.link_use import determined, firm
 
     rival = Rival(np.eye(4), np.eye(3), 0.9, 0.0, "a pose turned +180.0 deg and 7.00 m away")
     doubted = _registered(Status.SUSPECT)

@@ -16,8 +16,8 @@ from ndt_cli.ndt.quality import Sights, in_bin_refutes
 from ndt_cli.ndt.register import register
 from ndt_cli.ndt.result import Status
 from ndt_cli.pipeline.chain import run_chain, scene_of
+from ndt_cli.pipeline.link_use import determined
 from ndt_cli.pipeline.result import Dropped
-from ndt_cli.pipeline.solution import determined
 from ndt_cli.pipeline.verify import NodeStatus
 from ndt_cli.sim.indoor import FloorWorld, scan_floor
 

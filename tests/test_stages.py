@@ -108,7 +108,7 @@ def test_a_rejected_icp_correction_is_a_field_that_decides_the_link_covariance()
     """The rejection travels as ``icp_rejected`` (through the link files too), not as text: a
     link whose ICP was rejected gets the NDT covariance, whatever its warnings say."""
     from ndt_cli.ndt.result import RegistrationResult
-    from ndt_cli.pipeline.solution import link_covariance
+    from ndt_cli.pipeline.link_use import link_covariance
 
     rng = np.random.default_rng(5)
     target = _room(rng)

@@ -16,7 +16,8 @@ from ndt_cli.core.transforms import transform_errors
 from ndt_cli.ndt.result import Candidate, Rival, Status
 from ndt_cli.pipeline.graph import CHI2_6_999
 from ndt_cli.pipeline.hypotheses import choose
-from ndt_cli.pipeline.members import kept_share, network_links
+from ndt_cli.pipeline.link_use import kept_share
+from ndt_cli.pipeline.members import network_links
 from ndt_cli.pipeline.network import Bridges
 from ndt_cli.pipeline.solution import solve
 from ndt_cli.pipeline.verify import NodeStatus

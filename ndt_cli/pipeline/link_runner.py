@@ -23,10 +23,10 @@ from ndt_cli.ndt.prepare import PreparedScan
 from ndt_cli.ndt.result import Deeper, Status
 from ndt_cli.pipeline.executors import Executor
 from ndt_cli.pipeline.guesses import guess_text, turned_round
+from ndt_cli.pipeline.link_use import usable
 from ndt_cli.pipeline.links import Link, LinkStore, link_key, skipped_key
 from ndt_cli.pipeline.network import LinkKind, Pair, PlannedLink
 from ndt_cli.pipeline.scans import scan_names
-from ndt_cli.pipeline.solution import usable
 from ndt_cli.pipeline.tasks import LinkJob, ScanSummary, register_link, register_paths
 from ndt_cli.pipeline.tasks import summarise_scan as _summarise
 from ndt_cli.pipeline.workers import Failure

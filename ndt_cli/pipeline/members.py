@@ -7,7 +7,7 @@ evidence too. One its gate passed argues against a placement built on wrong link
 (no rivals) that its gate doubted can still be confirmed by a cycle. So both are links of the
 network (:func:`network_links`).
 
-A probe with rivals (:func:`~ndt_cli.pipeline.solution.contested`) is a link of the network
+A probe with rivals (:func:`~ndt_cli.pipeline.link_use.contested`) is a link of the network
 too, but only to be *checked*: the network may choose one of its poses where the firm links
 already tie its two scans together (a cycle checks it), never let it join two groups. Two
 groups join where two ambiguous links agree on one placement; the probes of a symmetric
@@ -23,9 +23,9 @@ from __future__ import annotations
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass, replace
 
+from ndt_cli.pipeline.link_use import contested, determined, kept_share
 from ndt_cli.pipeline.links import Link
 from ndt_cli.pipeline.network import Pair, classic_chain, kind_of
-from ndt_cli.pipeline.solution import contested, determined
 
 
 @dataclass(frozen=True)
@@ -47,7 +47,7 @@ def network_links(
 ) -> Members:
     """The links of the network among the ``registered`` ones (by pair): the ``plan``, the
     ``user``'s pairs, every link its gate passed, every firm link determined in every
-    direction (:func:`~ndt_cli.pipeline.solution.determined`), those tried for scans no ok
+    direction (:func:`~ndt_cli.pipeline.link_use.determined`), those tried for scans no ok
     link connects (so that the outputs say why), and, to be checked only, every other link
     with rivals. ``classic``: (number of scans, unreadable scans) for the classic chain, whose
     network is the chain in the order given and the user's pairs. ``adjacent``: neighbours
@@ -71,11 +71,3 @@ def network_links(
         for n, p in enumerate(chosen)
     ]
     return Members(links, frozenset(n for n, p in enumerate(chosen) if p in checked))
-
-
-def kept_share(link: Link) -> float:
-    """The kept pose's evidence over the most of any of the link's candidates (1: the pose of
-    most evidence was kept, or the link has no candidates)."""
-    found = () if link.result is None else link.result.candidates
-    most = max((c.evidence for c in found), default=0.0)
-    return found[0].evidence / most if most > 0.0 else 1.0

@@ -16,9 +16,9 @@ from numpy.linalg import inv
 
 from ndt_cli.ndt.overlap import COARSE_WINDOW
 from ndt_cli.pipeline.discovery import Placed, agree
+from ndt_cli.pipeline.link_use import usable
 from ndt_cli.pipeline.links import Link
 from ndt_cli.pipeline.network import Pair, default_radius, pair_of
-from ndt_cli.pipeline.solution import usable
 
 BRIDGE_MEMBERS = 8  # scans of a group whose coarse matches with other groups are ranked
 

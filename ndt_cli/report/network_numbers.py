@@ -7,7 +7,7 @@ the source scanner's position down in the target's frame, per direction: *along*
 between the two scanners (on a street, along the street), *across* it (horizontal) and *up*.
 It is the 1-sigma of that position from the link's covariance (the inverse of its information,
 the ICP normal matrix or the NDT Hessian, as the adjustment weighs it:
-:func:`ndt_cli.pipeline.solution.link_covariance`): a few millimetres for a strong link, metres
+:func:`ndt_cli.pipeline.link_use.link_covariance`): a few millimetres for a strong link, metres
 along a corridor whose walls give nothing along it.
 
 The **a-posteriori standard deviation of unit weight** is sqrt(sum of the kept links' chi-square
@@ -24,8 +24,8 @@ import numpy as np
 
 from ndt_cli.ndt.result import RegistrationResult
 from ndt_cli.pipeline.graph import components
+from ndt_cli.pipeline.link_use import link_covariance
 from ndt_cli.pipeline.result import ChainResult
-from ndt_cli.pipeline.solution import link_covariance
 from ndt_cli.pipeline.verify import EdgeState
 
 KEPT = (EdgeState.CONFIRMED, EdgeState.USED)

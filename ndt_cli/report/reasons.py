@@ -13,9 +13,10 @@ import re
 from collections import Counter
 from dataclasses import replace
 
+from ndt_cli.pipeline.link_use import usable
 from ndt_cli.pipeline.links import Link
 from ndt_cli.pipeline.result import ChainResult
-from ndt_cli.pipeline.solution import LinkFit, usable
+from ndt_cli.pipeline.solution import LinkFit
 from ndt_cli.pipeline.verify import EdgeState
 
 _VIA = re.compile(r"link (\d+) \(T_(\d+)_(\d+)\)")
