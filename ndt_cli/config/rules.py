@@ -56,6 +56,7 @@ RANGES: dict[str, tuple[float | None, float | None]] = {
     "refine.iterations": (1, 1000),
     "refine.max_correction": (1e-3, 10.0),
     "quality.overlap_distance": (0.01, 10.0),
+    "quality.walk_vouch_free_space": (0.0, 0.005),  # at most what refutes a pose indoors
 }
 # the gate's thresholds: (default, how a stricter value goes: "up" or "down", the other bound)
 GATE: dict[str, tuple[float, str, float]] = {

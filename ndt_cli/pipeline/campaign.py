@@ -450,10 +450,10 @@ class Campaign:
     def _network(self) -> Members:
         """The links of the result (:func:`~ndt_cli.pipeline.members.network_links`)."""
         classic = (len(self.paths), self.unreadable) if self.net.classic else None
-        weak = 0.0 if self.cfg.quality.weak_links_join else self.cfg.quality.min_kept_evidence
-        return network_links(
-            self.links, self.plan, self.net.given, self.walk.adjacent, classic, weak
-        )
+        q, walk = self.cfg.quality, self.walk.adjacent
+        weak = 0.0 if q.weak_links_join else q.min_kept_evidence
+        vouch = (q.min_kept_evidence, q.walk_vouch_free_space if self.walked else 0.0)
+        return network_links(self.links, self.plan, self.net.given, walk, classic, weak, vouch)
 
     def _user_todo(self) -> list[PlannedLink]:
         n = len(self.paths)

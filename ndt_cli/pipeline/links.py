@@ -69,6 +69,8 @@ class Link:
     result: RegistrationResult | None = None
     failure: str = ""
     kind: LinkKind = LinkKind.ADJACENT
+    vouched: bool = False  # the network trusts it on the walk's word (set by
+    # ndt_cli.pipeline.members, as kind is; not stored with the registration)
 
     @property
     def status(self) -> Status:

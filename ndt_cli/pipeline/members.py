@@ -23,9 +23,14 @@ from __future__ import annotations
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass, replace
 
-from ndt_cli.pipeline.link_use import contested, determined, kept_share
+from ndt_cli.pipeline.link_use import (
+    contested,
+    determined,
+    doubted_only_for_evidence,
+    kept_share,
+)
 from ndt_cli.pipeline.links import Link
-from ndt_cli.pipeline.network import Pair, classic_chain, kind_of
+from ndt_cli.pipeline.network import LinkKind, Pair, classic_chain, kind_of
 
 
 @dataclass(frozen=True)
@@ -44,6 +49,7 @@ def network_links(
     adjacent: Collection[Pair],
     classic: tuple[int, Collection[int]] | None = None,
     weak: float = 0.0,
+    vouch: tuple[float, float] = (0.0, 0.0),
 ) -> Members:
     """The links of the network among the ``registered`` ones (by pair): the ``plan``, the
     ``user``'s pairs, every link its gate passed, every firm link determined in every
@@ -53,7 +59,12 @@ def network_links(
     network is the chain in the order given and the user's pairs. ``adjacent``: neighbours
     along the walk (:func:`~ndt_cli.pipeline.network.kind_of`). A link kept with less than
     ``weak`` of the most evidence of its candidates (a pose the free space refuted had more)
-    is only checked too (``quality.weak_links_join`` false: ``quality.min_kept_evidence``)."""
+    is only checked too (``quality.weak_links_join`` false: ``quality.min_kept_evidence``),
+    unless it is *vouched*: a link between neighbours along the walk that its gate doubted
+    only for that evidence, its free space clear (``vouch``: ``quality.min_kept_evidence`` and
+    ``quality.walk_vouch_free_space``, the second 0 out of walking order; see
+    :func:`~ndt_cli.pipeline.link_use.doubted_only_for_evidence`); the network trusts a
+    vouched link as if its gate had passed it."""
     if classic is not None:
         pairs = {k.pair for k in classic_chain(*classic)} | set(user)
         checked: set[Pair] = set()
@@ -67,7 +78,13 @@ def network_links(
         checked |= {p for p in pairs if p in registered and kept_share(registered[p]) < weak}
     chosen = sorted(p for p in pairs if p in registered)
     links = [
-        replace(registered[p], index=n, kind=kind_of(p, user, adjacent))
-        for n, p in enumerate(chosen)
+        _member(registered[p], n, kind_of(p, user, adjacent), vouch) for n, p in enumerate(chosen)
     ]
-    return Members(links, frozenset(n for n, p in enumerate(chosen) if p in checked))
+    only = frozenset(n for n, p in enumerate(chosen) if p in checked and not links[n].vouched)
+    return Members(links, only)
+
+
+def _member(link: Link, index: int, kind: LinkKind, vouch: tuple[float, float]) -> Link:
+    """The registered ``link`` as the network's ``index``-th, of ``kind``, vouched or not."""
+    walked = kind is LinkKind.ADJACENT and doubted_only_for_evidence(link, *vouch)
+    return replace(link, index=index, kind=kind, vouched=walked)

@@ -285,6 +285,8 @@ def _fits(links: Sequence[Link], net: _Network) -> tuple[LinkFit, ...]:
             reason = f"{net.choices[k].reason}; {reason}"
         if links[k].status is Status.DEGENERATE and verdict.state is not EdgeState.REJECTED:
             reason += "; degenerate: only its rotation and height count"
+        if links[k].vouched:
+            reason += f"; vouched for by the walk, its gate's doubt: {links[k].reason}"
         fits[k] = LinkFit(verdict.state, verdict.residual, reason)
     return tuple(fits)
 
@@ -295,7 +297,8 @@ def _edge(link: Link, walk: bool = False) -> Edge:
     flat = link.status is Status.DEGENERATE  # where its scans are horizontally: unknown
     T, cov = r.T_reduced, link_covariance(r)
     walked = walk and link.kind is LinkKind.ADJACENT
-    return Edge(link.target, link.source, T, cov, link.ok, horizontal=not flat, walked=walked)
+    trusted = link.ok or link.vouched
+    return Edge(link.target, link.source, T, cov, trusted, horizontal=not flat, walked=walked)
 
 
 def _hypotheses(link: Link, k: int) -> list[Hypothesis]:
