@@ -74,6 +74,15 @@ def test_links_whose_rivals_agree_as_well_as_their_kept_poses_leave_the_groups_a
     assert clear[7].chosen.choice == 0 and clear[8].chosen.choice == 0
 
 
+def test_a_link_left_unchosen_with_its_kept_pose_alone_is_not_called_ambiguous():
+    """A firm link that only bridges would keep goes to the choice with its kept pose alone;
+    left unchosen, it says no other link agreed, not that it had rivals."""
+    groups, poses = _groups()
+    got = choose(groups, poses, {7: [_hyp(7, 0, 0, 3, _true(0, 3), 1.0)]}, CHI2_6_999, 0.5)
+    assert got[7].chosen is None and not got[7].rejected
+    assert "ambiguous" not in got[7].reason and "no other link agrees" in got[7].reason
+
+
 def test_a_lone_ambiguous_link_between_two_groups_is_never_enough():
     groups, poses = _groups()
     hyps = {7: [_hyp(7, 0, 0, 3, _true(0, 3), 1.0), _hyp(7, 1, 0, 3, _flipped(0, 3), 0.6)]}

@@ -115,9 +115,17 @@ def choose(
         choices.update(joined)
     for k, hyps in hypotheses.items():
         if k not in choices:
-            rivals = "; ".join(f"pose {h.choice}" for h in hyps[1:])
-            choices[k] = Choice(k, None, f"ambiguous: the network could not choose ({rivals})")
+            choices[k] = Choice(k, None, _unchosen(hyps))
     return choices
+
+
+def _unchosen(hyps: list[Hypothesis]) -> str:
+    """Why a link was not chosen: its poses tied, or (a link with its kept pose alone) no
+    other link agreed with where it puts its scans."""
+    if len(hyps) == 1:
+        return "not chosen: no other link agrees with where it puts its scans"
+    rivals = "; ".join(f"pose {h.choice}" for h in hyps[1:])
+    return f"ambiguous: the network could not choose ({rivals})"
 
 
 def _within(state: _Groups, pending: dict[int, list[Hypothesis]], threshold: float) -> dict:
