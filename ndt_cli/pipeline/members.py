@@ -86,5 +86,5 @@ def network_links(
 
 def _member(link: Link, index: int, kind: LinkKind, vouch: tuple[float, float]) -> Link:
     """The registered ``link`` as the network's ``index``-th, of ``kind``, vouched or not."""
-    walked = kind is LinkKind.ADJACENT and doubted_only_for_evidence(link, *vouch)
-    return replace(link, index=index, kind=kind, vouched=walked)
+    vouched = kind is LinkKind.ADJACENT and doubted_only_for_evidence(link, *vouch)
+    return replace(link, index=index, kind=kind, vouched=vouched)
