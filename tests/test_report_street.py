@@ -401,7 +401,8 @@ def test_both_reports_fit_400_and_1024_px_and_every_figure_loads(busy, control):
 
 def test_a_link_left_unused_though_its_gate_passed_it_says_why():
     """The report adds the network's words where the link's own do not explain its state:
-    rejected, or ok by its gate and unused (a bridge that no bridge rule lets in)."""
+    rejected, ok by its gate and unused (a bridge that no bridge rule lets in), or used though
+    its gate did not pass it."""
     from types import SimpleNamespace
 
     from ndt_cli.pipeline.verify import EdgeState
@@ -416,4 +417,6 @@ def test_a_link_left_unused_though_its_gate_passed_it_says_why():
     assert network_note(failed, fit(EdgeState.REJECTED)) == said
     assert network_note(failed, fit(EdgeState.UNUSED)) == ""  # its own reason says why
     assert network_note(ok, fit(EdgeState.CONFIRMED)) == ""
+    assert network_note(failed, fit(EdgeState.USED)) == said  # used though its gate doubted it
+    assert network_note(failed, fit(EdgeState.CONFIRMED)) == said
     assert network_note(ok, None) == ""

@@ -86,9 +86,23 @@ def test_a_vouched_link_ties_its_scan_in_as_a_bridge_between_walk_neighbours_doe
     rot, trans = transform_errors(walked.scans[2].T_world_scan, T[2])
     assert rot < 1e-6 and trans < 1e-6
     assert walked.links[1].state is EdgeState.USED
-    assert "vouched for by the walk" in walked.links[1].reason and "slid" in walked.links[1].reason
+    assert "vouched for by the walk" in walked.links[1].reason
+    assert "slid" in links[1].reason  # the gate's doubt stays the link's own (pairs.csv reason)
     alone = solve(3, 0, links, True, {}, bridges=Bridges.NONE)  # no bridge trusted at all
     assert alone.scans[2].status is not NodeStatus.OK
+
+
+def test_the_report_says_why_a_link_its_gate_doubted_is_in_use():
+    """The link table gives both: the gate's doubt and the network's word that the walk
+    vouched for it (else a suspect link reads as used with no reason)."""
+    from ndt_cli.report.html_chain import STATE_WORDS, link_row
+
+    links, _ = _chain(vouched=True)
+    fit = solve(3, 0, links, True, {}, bridges=Bridges.WALK).links[1]
+    row = link_row(("a", "b", "c"), links[1], STATE_WORDS[fit.state], fit)
+    assert row.status == "suspect" and row.state == "not checked"
+    assert any("slid" in w for w in row.warnings)
+    assert any(w.startswith("network:") and "vouched for by the walk" in w for w in row.warnings)
 
 
 def test_a_link_not_vouched_for_ties_no_scan_in_on_a_doubting_gate():

@@ -33,6 +33,7 @@ from ndt_cli.pipeline.link_use import firm, link_covariance, usable
 from ndt_cli.pipeline.links import Link
 from ndt_cli.pipeline.network import Bridges, LinkKind
 from ndt_cli.pipeline.verify import (
+    GATES_WORD,
     EdgeState,
     EdgeVerdict,
     NodeStatus,
@@ -286,9 +287,15 @@ def _fits(links: Sequence[Link], net: _Network) -> tuple[LinkFit, ...]:
         if links[k].status is Status.DEGENERATE and verdict.state is not EdgeState.REJECTED:
             reason += "; degenerate: only its rotation and height count"
         if links[k].vouched:
-            reason += f"; vouched for by the walk, its gate's doubt: {links[k].reason}"
+            reason = _vouched(reason)
         fits[k] = LinkFit(verdict.state, verdict.residual, reason)
     return tuple(fits)
+
+
+def _vouched(reason: str) -> str:
+    """The network's reason for a link the walk vouched for: the walk's word, not its gate's."""
+    said = "vouched for by the walk (its gate doubted it for its evidence alone)"
+    return reason.replace(GATES_WORD, said) if GATES_WORD in reason else f"{reason}; {said}"
 
 
 def _edge(link: Link, walk: bool = False) -> Edge:

@@ -54,6 +54,9 @@ from ndt_cli.pipeline.marginals import UNDETERMINED_VAR
 MAX_SIGMA_M = 0.2  # m: a scan whose adjusted horizontal position is less certain is suspect
 MAX_SIGMA_DEG = 0.2  # degrees: likewise for its heading
 
+GATES_WORD = "its gate's word"
+"""Why a kept link no cycle checks is used: its gate passed it (see :func:`states`)."""
+
 
 class EdgeState(StrEnum):
     """What :func:`verify` made of a link.
@@ -295,12 +298,10 @@ class _Verifier:
                 )
                 out.append((EdgeState.UNUSED, text))
             elif k in free and k in self.born_bridges:
-                out.append(
-                    (EdgeState.USED, "a bridge (on no cycle that checks it): its gate's word")
-                )
+                out.append((EdgeState.USED, f"a bridge (on no cycle that checks it): {GATES_WORD}"))
             elif k in free:
                 text = "a bridge once links of its cycles were rejected: which was wrong is "
-                out.append((EdgeState.USED, text + "ambiguous; its gate's word"))
+                out.append((EdgeState.USED, f"{text}ambiguous; {GATES_WORD}"))
             else:
                 chi2 = self.last[k].chi2 if k in self.last else float("nan")
                 text = f"on a cycle of kept links, chi2 {chi2:.4g} <= {self.threshold:.2f}"

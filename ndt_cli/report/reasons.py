@@ -26,12 +26,12 @@ _PAIR = re.compile(r"\blink (\d+)-(\d+)\b")
 
 def network_note(link: Link, fit: LinkFit | None) -> str:
     """What the network says of a link, where the link's own words do not explain its state:
-    rejected, or left unused though its gate passed it (a bridge nothing checks); '' else."""
+    rejected, left unused though its gate passed it (a bridge nothing checks), or used though
+    its gate did not pass it (vouched for by the walk, a weak link joining groups); '' else."""
     if fit is None or not fit.reason:
         return ""
-    if fit.state is EdgeState.REJECTED or (fit.state is EdgeState.UNUSED and link.ok):
-        return f"network: {fit.reason}"
-    return ""
+    used = fit.state in (EdgeState.USED, EdgeState.CONFIRMED)
+    return f"network: {fit.reason}" if fit.state is EdgeState.REJECTED or used != link.ok else ""
 
 
 def named_reason(reason: str, names: tuple[str, ...], used: list[tuple[int, int]]) -> str:
