@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks import data
+from benchmarks import data, routes
 from benchmarks.common import RUN_BIN, fmt, table, target
 from ndt_cli import sim
 from ndt_cli.analysis import trust
@@ -42,9 +42,9 @@ def _campaign(files: list[Path], out: Path, anchor: int = 0) -> tuple[float, Cam
     return time.perf_counter() - t0, (campaign, result)
 
 
-def _walk_index(walk: sim.Survey, other: sim.Survey) -> list[int]:
-    """For each scan of ``other`` (the same scans in another order), its index in ``walk``."""
-    return [next(j for j, P in enumerate(walk.poses) if np.array_equal(P, Q)) for Q in other.poses]
+def _walk_index(walk: list[np.ndarray], other: list[np.ndarray]) -> list[int]:
+    """For each pose of ``other`` (the same scans in another order), its index in ``walk``."""
+    return [next(j for j, P in enumerate(walk) if np.array_equal(P, Q)) for Q in other]
 
 
 def _same_as_walk(walk, result, order: list[int]) -> tuple[int, float]:
@@ -77,17 +77,16 @@ def scaling(
     rows, per_scan, agree = [], {}, {}
     with tempfile.TemporaryDirectory() as tmp:
         for n in sizes:
-            survey = sim.route(seed=5, n_scans=n, rays=RAYS)
-            orders = [("walk", survey, True)]
+            route = routes.walk(n, seed=5, rays=RAYS)
+            orders = [("walk", None)]
             if n in shuffled:
-                mixed = sim.shuffled(survey, seed=1)
-                orders += [("shuffled", mixed, False), ("shuffled, timed", mixed, True)]
-            for label, s, times in orders:
-                order = _walk_index(survey, s)  # anchored at the walk's anchor: comparable
+                orders += [("shuffled", False), ("shuffled, timed", True)]
+            for label, times in orders:
                 folder = f"{label.replace(', ', '_')}{n}"
-                files = sim.write_survey(s, Path(tmp) / folder, times=times)
+                s = route if times is None else routes.shuffled(route, Path(tmp) / folder, 1, times)
+                order = _walk_index(route.poses, s.poses)  # anchored at the walk's anchor
                 out = Path(tmp) / f"out_{folder}"
-                wall, (campaign, result) = _campaign(files, out, order.index(0))
+                wall, (campaign, result) = _campaign(s.files, out, order.index(0))
                 if label == "walk":
                     walk = result
                 same, worst = _same_as_walk(walk, result, order)

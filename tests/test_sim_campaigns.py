@@ -68,3 +68,21 @@ def test_campaigns_are_deterministic_in_the_seed():
     one, two = sim.route(seed=7, n_scans=3, rays=(100, 20)), sim.route(7, 3, rays=(100, 20))
     assert all(np.array_equal(a, b) for a, b in zip(one.scans, two.scans, strict=True))
     assert all(np.array_equal(a, b) for a, b in zip(one.poses, two.poses, strict=True))
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_a_route_written_scan_by_scan_is_the_route_simulated_at_once(tmp_path, jobs):
+    """``write_route`` (memory for one scan a worker) writes the files ``route`` and
+    ``write_survey`` write: the same points, times and poses."""
+    from ndt_cli import io
+
+    route = sim.route(seed=2, n_scans=4, rays=(200, 40))
+    whole = sim.write_survey(route, tmp_path / "whole", times=True)
+    files, poses = sim.write_route(
+        tmp_path / "streamed", seed=2, n_scans=4, rays=(200, 40), times=True, jobs=jobs
+    )
+    assert [f.name for f in files] == [f.name for f in whole]
+    for a, b, T, P in zip(whole, files, route.poses, poses, strict=True):
+        assert np.array_equal(io.read(a).points, io.read(b).points)
+        assert io.acquired(a) == io.acquired(b) is not None
+        assert np.array_equal(T, P)

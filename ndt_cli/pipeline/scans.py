@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
+import os
 import re
 import threading
 from collections.abc import Sequence
@@ -106,8 +107,10 @@ def hash_ahead(paths: Sequence[Path]) -> threading.Thread:
 def scan_names(paths: Sequence[Path]) -> list[str]:
     """One name per scan, unique: the file name, or the shortest tail of the path that no
     other scan shares (``north/scan_1.laz`` and ``south/scan_1.laz``)."""
+    names = [os.path.basename(p) for p in paths]  # called per link: linear, and cheap
+    if len(set(names)) == len(names):
+        return names
     parts = [Path(p).parts for p in paths]
-    names = [p.name for p in map(Path, paths)]
     depth = 1
     while len(set(names)) < len(names):
         depth += 1

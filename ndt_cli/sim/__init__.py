@@ -13,6 +13,7 @@ from ndt_cli.sim.campaigns import (
     route,
     shuffled,
     two_sites,
+    write_route,
     write_survey,
 )
 from ndt_cli.sim.district import DistrictWorld, scan_district
@@ -46,5 +47,6 @@ __all__ = [
     "shuffled",
     "simulate_scan",
     "two_sites",
+    "write_route",
     "write_survey",
 ]

@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
+from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
@@ -96,25 +98,35 @@ def within_reach(scene: Scene, xy: np.ndarray, reach: float = _REACH) -> Scene:
     )
 
 
-def _survey(
-    scene: Scene, stations: np.ndarray, seed: int, rays: tuple[int, int], prefix: str = "scan"
-) -> Survey:
-    """Scan ``scene`` from each station (jittered by up to 2 m, any heading, 1.5-1.8 m high)."""
+def _standpoints(scene: Scene, stations: np.ndarray, seed: int) -> list[tuple[np.ndarray, int]]:
+    """Per station its true ``T_world_scan`` (jittered by up to 2 m, any heading, 1.5-1.8 m
+    high) and the seed of its scan's noise: drawn in station order, whoever simulates them."""
     rng = np.random.default_rng([seed, 11])
-    scans, poses = [], []
+    out = []
     for k, xy in enumerate(stations):
         p = xy + rng.uniform(-2.0, 2.0, 2)
         height = float(scene.ground_z(*p)) + rng.uniform(1.5, 1.8)
         T = scanner_pose(p[0], p[1], rng.uniform(-180.0, 180.0), height)
-        noise = int(rng.integers(0, 2**31 - 1))
-        pts = simulate_scan(
-            within_reach(scene, p), T, n_azimuth=rays[0], n_elevation=rays[1], seed=noise + k
-        )
-        scans.append(pts)
-        poses.append(T)
+        out.append((T, int(rng.integers(0, 2**31 - 1)) + k))
+    return out
+
+
+def _scan(scene: Scene, T: np.ndarray, rays: tuple[int, int], noise: int) -> np.ndarray:
+    """The points (N,3, scanner frame, m) a scanner at ``T`` (world) sees of ``scene``."""
+    near = within_reach(scene, T[:2, 3])
+    return simulate_scan(near, T, n_azimuth=rays[0], n_elevation=rays[1], seed=noise)
+
+
+def _survey(
+    scene: Scene, stations: np.ndarray, seed: int, rays: tuple[int, int], prefix: str = "scan"
+) -> Survey:
+    """Scan ``scene`` from each station (:func:`_standpoints`)."""
+    standpoints = _standpoints(scene, stations, seed)
+    scans = [_scan(scene, T, rays, noise) for T, noise in standpoints]
     names = tuple(f"{prefix}_{k:02d}" for k in range(len(scans)))
     taken = tuple(DAY_START + STANDPOINT_S * k for k in range(len(scans)))
-    return Survey(scene, names, tuple(scans), tuple(poses), (0,) * len(scans), taken)
+    poses = tuple(T for T, _ in standpoints)
+    return Survey(scene, names, tuple(scans), poses, (0,) * len(scans), taken)
 
 
 def write_survey(survey: Survey, folder: Path, *, times: bool = False) -> list[Path]:
@@ -123,10 +135,50 @@ def write_survey(survey: Survey, folder: Path, *, times: bool = False) -> list[P
     (:attr:`Survey.taken`) plus its place among the points over :data:`SCAN_S`."""
     folder.mkdir(parents=True, exist_ok=True)
     files = [folder / f"{n}.laz" for n in survey.names]
-    for k, (f, pts) in enumerate(zip(files, survey.scans, strict=True)):
-        t = survey.taken[k] + SCAN_S * np.arange(len(pts)) / max(len(pts), 1) if times else None
-        io.write(f, pts, gps_time=t)
+    for f, pts, taken in zip(files, survey.scans, survey.taken, strict=True):
+        _write_scan(f, pts, taken if times else None)
     return files
+
+
+def _write_scan(path: Path, pts: np.ndarray, taken: float | None) -> None:
+    """One scan's LAZ file; ``taken``: its start (s of the GPS week) when it holds times."""
+    t = None if taken is None else taken + SCAN_S * np.arange(len(pts)) / max(len(pts), 1)
+    io.write(path, pts, gps_time=t)
+
+
+def _simulated_file(path: Path, near: Scene, T: np.ndarray, rays, noise: int, taken) -> Path:
+    """Simulate one scan and write it (a worker's task: the scene within reach only)."""
+    _write_scan(path, _scan(near, T, rays, noise), taken)
+    return path
+
+
+def write_route(
+    folder: Path,
+    seed: int = 0,
+    n_scans: int = 16,
+    spacing: float = 16.0,
+    rays: tuple[int, int] = (600, 80),
+    *,
+    times: bool = False,
+    jobs: int = 1,
+) -> tuple[list[Path], list[np.ndarray]]:
+    """The files :func:`route` and :func:`write_survey` would write (the same points), each
+    simulated and written on its own, ``jobs`` at a time: memory for ``jobs`` scans, not for
+    the campaign (a thousand scans). Returns the files and their true ``T_world_scan``."""
+    scene, stations = _route(seed, n_scans, spacing)
+    standpoints = _standpoints(scene, stations, seed)
+    folder.mkdir(parents=True, exist_ok=True)
+    tasks = []
+    for k, (T, noise) in enumerate(standpoints):
+        taken = DAY_START + STANDPOINT_S * k if times else None
+        near = within_reach(scene, T[:2, 3])
+        tasks.append((folder / f"scan_{k:02d}.laz", near, T, rays, noise, taken))
+    if jobs <= 1:
+        files = [_simulated_file(*t) for t in tasks]
+    else:
+        with ProcessPoolExecutor(jobs, mp_context=get_context("spawn")) as pool:
+            files = list(pool.map(_simulated_file, *zip(*tasks, strict=True)))
+    return files, [T for T, _ in standpoints]
 
 
 def junction(seed: int = 0, spacing: float = 16.0, rays: tuple[int, int] = RAYS) -> Survey:
@@ -191,10 +243,15 @@ def route(
     seed: int = 0, n_scans: int = 16, spacing: float = 16.0, rays: tuple[int, int] = (600, 80)
 ) -> Survey:
     """``n_scans`` along one long street (very sparse scans by default): a campaign whose size
-    is the only thing that grows (benchmarks)."""
+    is the only thing that grows (benchmarks; :func:`write_route` writes it scan by scan)."""
+    return _survey(*_route(seed, n_scans, spacing), seed, rays)
+
+
+def _route(seed: int, n_scans: int, spacing: float) -> tuple[Scene, np.ndarray]:
+    """The street of :func:`route` (60 m beyond its first and last station) and its stations."""
     length = spacing * (n_scans - 1)
     scene = _street(seed, (-60.0, 0.0), (length + 60.0, 0.0))
-    return _survey(scene, stations_along([(0.0, 0.0), (length, 0.0)], spacing), seed, rays)
+    return scene, stations_along([(0.0, 0.0), (length, 0.0)], spacing)
 
 
 def shuffled(survey: Survey, seed: int = 0) -> Survey:
