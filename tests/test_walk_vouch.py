@@ -87,6 +87,8 @@ def test_a_vouched_link_ties_its_scan_in_as_a_bridge_between_walk_neighbours_doe
     assert rot < 1e-6 and trans < 1e-6
     assert walked.links[1].state is EdgeState.USED
     assert "vouched for by the walk" in walked.links[1].reason
+    assert "its gate's word" not in walked.links[1].reason
+    assert "not chosen" not in walked.links[1].reason  # used: the choice's words do not apply
     assert "slid" in links[1].reason  # the gate's doubt stays the link's own (pairs.csv reason)
     alone = solve(3, 0, links, True, {}, bridges=Bridges.NONE)  # no bridge trusted at all
     assert alone.scans[2].status is not NodeStatus.OK
@@ -103,6 +105,34 @@ def test_the_report_says_why_a_link_its_gate_doubted_is_in_use():
     assert row.status == "suspect" and row.state == "not checked"
     assert any("slid" in w for w in row.warnings)
     assert any(w.startswith("network:") and "vouched for by the walk" in w for w in row.warnings)
+
+
+def test_a_lone_vouched_link_reads_as_used_on_the_walks_word():
+    """Scans 1 and 2 with one link between them, vouched for, and none to the anchor: no
+    choice was made (no other link agrees or disagrees), so its reason says the walk vouched,
+    not that it was not chosen; the two scans are ok in a cluster of their own."""
+    _, T = _chain(vouched=True)
+    hess = {"hessian": np.diag([1e4, 1e4, 1e6])}
+    lone = _slid(T_target_source=np.linalg.inv(T[1]) @ T[2], **hess)
+    links = [replace(lone, index=0, target=1, source=2, vouched=True)]
+    solution = solve(3, 0, links, True, {}, bridges=Bridges.WALK)
+    assert [s.cluster for s in solution.scans] == [0, 1, 1]
+    assert solution.scans[2].status is NodeStatus.OK
+    reason = solution.links[0].reason
+    assert "vouched for by the walk" in reason and "not chosen" not in reason, reason
+
+
+def test_the_verdict_lists_a_vouched_link_apart_from_those_its_gate_passed():
+    from types import SimpleNamespace
+
+    from ndt_cli.report.verdict import _link_remarks
+
+    links, _ = _chain(vouched=True)
+    solution = solve(3, 0, links, True, {}, bridges=Bridges.WALK)
+    remarks = _link_remarks(SimpleNamespace(links=links, solution=solution, names="abc"))
+    assert len(remarks) == 2
+    assert "gate's word" in remarks[0] and "a <- b" in remarks[0] and "b <- c" not in remarks[0]
+    assert "doubted by their gate" in remarks[1] and "b <- c" in remarks[1]
 
 
 def test_a_link_not_vouched_for_ties_no_scan_in_on_a_doubting_gate():

@@ -282,7 +282,7 @@ def _fits(links: Sequence[Link], net: _Network) -> tuple[LinkFit, ...]:
         fits[k] = LinkFit(state, reason=c.reason)
     for verdict, k in zip(net.v.edges, net.used, strict=True):
         reason = verdict.reason
-        if k in net.choices:
+        if k in net.choices and net.choices[k].chosen is not None:  # else used as a walk bridge
             reason = f"{net.choices[k].reason}; {reason}"
         if links[k].status is Status.DEGENERATE and verdict.state is not EdgeState.REJECTED:
             reason += "; degenerate: only its rotation and height count"

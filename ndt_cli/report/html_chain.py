@@ -193,7 +193,8 @@ _NOTES = (
     "deliverables.",
     "State of a link: confirmed = on a cycle of links that agree within their uncertainties "
     "(chi-square, p = 0.999); not checked = kept on its own quality gate's word, no cycle "
-    "passes through it (a second link to its scans would check it); rejected = disagrees with "
+    "passes through it (a second link to its scans would check it), or, where its gate "
+    "doubted it, on the network's (its reason says why); rejected = disagrees with "
     "the others; not used = neither checkable nor passed by its gate. Registrations tried and "
     "left out are listed apart.",
 )

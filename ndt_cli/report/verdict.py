@@ -62,18 +62,27 @@ def _control_remarks(result: ChainResult) -> list[str]:
 
 
 def _link_remarks(result: ChainResult) -> list[str]:
-    by_state: dict[EdgeState, list[str]] = {s: [] for s in EdgeState}
+    """The links rejected, and those used with no cycle to check them: on their gate's word,
+    or on the network's though their gate doubted them (vouched for by the walk)."""
+    rejected, by_gate, doubted = [], [], []
     for link, fit in zip(result.links, result.solution.links, strict=True):
-        by_state[fit.state].append(f"{result.names[link.target]} <- {result.names[link.source]}")
+        name = f"{result.names[link.target]} <- {result.names[link.source]}"
+        if fit.state is EdgeState.REJECTED:
+            rejected.append(name)
+        elif fit.state is EdgeState.USED:
+            (by_gate if link.ok else doubted).append(name)
     out = []
-    if by_state[EdgeState.REJECTED]:
-        rejected = by_state[EdgeState.REJECTED]
+    if rejected:
         out.append(f"{len(rejected)} link(s) rejected by the adjustment: {_named(rejected)}")
-    if by_state[EdgeState.USED]:
-        used = by_state[EdgeState.USED]
+    if by_gate:
         out.append(
-            f"{len(used)} link(s) not checked by any cycle (kept on their own quality gate's "
-            f"word): {_named(used)}"
+            f"{len(by_gate)} link(s) not checked by any cycle (kept on their own quality gate's "
+            f"word): {_named(by_gate)}"
+        )
+    if doubted:
+        out.append(
+            f"{len(doubted)} link(s) not checked by any cycle and doubted by their gate, kept on "
+            f"the network's word (its reason in the link table): {_named(doubted)}"
         )
     return out
 
