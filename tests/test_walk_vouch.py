@@ -97,6 +97,7 @@ def test_a_vouched_link_ties_its_scan_in_as_a_bridge_between_walk_neighbours_doe
 def test_the_report_says_why_a_link_its_gate_doubted_is_in_use():
     """The link table gives both: the gate's doubt and the network's word that the walk
     vouched for it (else a suspect link reads as used with no reason)."""
+    from ndt_cli.report.html_cards import _lines
     from ndt_cli.report.html_chain import STATE_WORDS, link_row
 
     links, _ = _chain(vouched=True)
@@ -105,6 +106,9 @@ def test_the_report_says_why_a_link_its_gate_doubted_is_in_use():
     assert row.status == "suspect" and row.state == "not checked"
     assert any("slid" in w for w in row.warnings)
     assert any(w.startswith("network:") and "vouched for by the walk" in w for w in row.warnings)
+    caption = _lines(row, None)  # the link inspector's card says it too
+    assert caption[0].startswith("adjacent, registration suspect")
+    assert "vouched for by the walk" in caption[1]
 
 
 def test_a_lone_vouched_link_reads_as_used_on_the_walks_word():

@@ -65,7 +65,7 @@ def _lines(row: LinkRow, view: Picture | None) -> tuple[str, ...]:
     else:
         residual = "no residual (no cycle checks it)" if row.state == "not checked" else ""
     first = "; ".join(p for p in (f"{row.kind}, registration {row.status}", residual) if p)
-    lines = [first]
+    lines = [first, row.network] if row.network else [first]
     if row.strength_mm is not None:
         parts = [
             f"{name} {'free' if v > 1000 else f'{v:.0f} mm'}"

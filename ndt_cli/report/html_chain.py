@@ -65,6 +65,7 @@ def link_row(names: Sequence[str], link: Link, state: str, fit: LinkFit | None) 
         warnings=warnings,
         strength_mm=None if r is None else link_strength(r).as_mm(),
         figure=f"link-{link.index}" if r is not None else "",
+        network=note,
     )
 
 

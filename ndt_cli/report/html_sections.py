@@ -50,7 +50,8 @@ class LinkRow:
     report words it (confirmed, not checked, rejected, not used; a registration left out: not
     planned, other way kept). ``overlap`` is a fraction (0-1, shown in %); a link no cycle
     checks has no residual. ``strength_mm``: 1-sigma along, across, up (mm; None: no
-    transform); ``figure``: the id of its inspector figure ('' : none).
+    transform); ``figure``: the id of its inspector figure ('' : none); ``network``: the
+    network's note (also among ``warnings``), as :func:`~ndt_cli.report.reasons.network_note`.
     """
 
     kind: str
@@ -67,6 +68,7 @@ class LinkRow:
     warnings: tuple[str, ...] = ()
     strength_mm: tuple[float, float, float] | None = None
     figure: str = ""
+    network: str = ""  # what the network says of it, where its own words do not explain it
 
 
 @dataclass(frozen=True)
@@ -158,8 +160,9 @@ _TRIED_COLUMNS = (
 
 _LEGEND = (
     '<p class="legend">Status colours: <span class="st st-ok">green</span> ok, confirmed; '
-    '<span class="st st-info">dashed blue</span> not checked (kept on its own quality gate, '
-    'no cycle checks it); <span class="st st-warn">amber</span> suspect, degenerate; '
+    '<span class="st st-info">dashed blue</span> not checked (no cycle checks it: kept on its '
+    "own quality gate's word or, where the gate doubted it, on the network's, its reason given); "
+    '<span class="st st-warn">amber</span> suspect, degenerate; '
     '<span class="st st-bad">red</span> failed, rejected, unposed. '
     f"{DASH} : no value.</p>"
 )
