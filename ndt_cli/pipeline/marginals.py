@@ -43,13 +43,22 @@ def _pseudo_inverse(
 
 def _blocks(information: np.ndarray) -> list[np.ndarray]:
     """The 6x6 diagonal blocks of the pseudo-inverse of a symmetric ``information`` matrix,
-    plus :data:`UNDETERMINED_VAR` times the projection onto its null space."""
-    w, V = np.linalg.eigh((information + information.T) / 2.0)
+    plus :data:`UNDETERMINED_VAR` times the projection onto its null space.
+
+    Decomposed with unit diagonal (Jacobi scaling): unscaled, the anchor's prior (1e12) and
+    radians beside metres made a long corridor's weakest determined directions (a thousand
+    scans: eigenvalues near 1e-4) fall within the decomposition's rounding of the largest,
+    and every scan read as undetermined by hundreds of metres."""
+    H = (information + information.T) / 2.0
+    d = np.sqrt(np.clip(np.diag(H), 0.0, None))
+    d[d == 0.0] = 1.0  # a direction no factor touches: free, left as it is
+    w, V = np.linalg.eigh(H / np.outer(d, d))
     free = w <= _NULL_RTOL * max(float(w.max()), 1e-300)
-    Vd, Vf = V[:, ~free], V[:, free]
+    Vd = V[:, ~free] / d[:, None]  # back to the information's own units
+    null, _ = np.linalg.qr(V[:, free] / d[:, None])  # the null space of H, orthonormal
     out = []
     for i in range(0, len(w), _DIM):
         rows = slice(i, i + _DIM)
-        cov = (Vd[rows] / w[~free]) @ Vd[rows].T + UNDETERMINED_VAR * Vf[rows] @ Vf[rows].T
+        cov = (Vd[rows] / w[~free]) @ Vd[rows].T + UNDETERMINED_VAR * null[rows] @ null[rows].T
         out.append(cov)
     return out
