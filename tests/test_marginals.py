@@ -47,3 +47,35 @@ def test_a_free_direction_is_undetermined_and_the_rest_as_gtsam_says():
     np.testing.assert_allclose(  # node 2 does not depend on node 1's free x
         covs[2], gtsam.Marginals(determined, values).marginalCovariance(2), rtol=1e-6, atol=1e-12
     )
+
+
+def _corridor(n: int, free_last: bool) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
+    """``n`` scans 16 m apart in a line, each tied to the one before it (rotation to 1e-4 rad,
+    position to 1 cm); the last one's link says nothing along x when ``free_last``."""
+    graph = gtsam.NonlinearFactorGraph()
+    graph.add(gtsam.PriorFactorPose3(0, gtsam.Pose3(), gtsam.noiseModel.Isotropic.Sigma(6, 1e-6)))
+    values = gtsam.Values()
+    values.insert(0, gtsam.Pose3())
+    step = gtsam.Pose3(gtsam.Rot3(), np.array([16.0, 0.0, 0.0]))
+    for k in range(1, n):
+        precisions = np.array([1e8, 1e8, 1e8, 1e4, 1e4, 1e4])
+        if free_last and k == n - 1:
+            precisions[3] = 0.0
+        noise = gtsam.noiseModel.Diagonal.Precisions(precisions)
+        graph.add(gtsam.BetweenFactorPose3(k - 1, k, step, noise))
+        values.insert(k, gtsam.Pose3(gtsam.Rot3(), np.array([16.0 * k, 0.0, 0.0])))
+    return graph, values
+
+
+def test_a_long_corridor_keeps_its_determined_scans_determined():
+    """Four hundred scans (6.4 km) and the last one free along x: the fallback gives the other
+    scans GTSAM's covariances, not hundreds of metres (the anchor's prior beside a corridor's
+    weakest directions put them within the decomposition's rounding)."""
+    n = 400
+    graph, values = _corridor(n, free_last=True)
+    covs = marginal_covariances(gtsam, graph, values, range(n))
+    reference = gtsam.Marginals(*_corridor(n - 1, free_last=False)[:1], values)
+    for k in (1, 10, 100, n - 2):
+        expected = reference.marginalCovariance(k)
+        np.testing.assert_allclose(np.diag(covs[k]), np.diag(expected), rtol=1e-3)
+    assert covs[n - 1][3, 3] >= UNDETERMINED_VAR * 0.99
