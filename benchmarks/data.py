@@ -25,10 +25,19 @@ RAYS = {"n_azimuth": 4500, "n_elevation": 640}  # ~2 M points per scan
 SMALL_RAYS = {"n_azimuth": 1424, "n_elevation": 202}  # a tenth of the rays: ~0.2 M points
 
 
-def _key(rays: dict[str, int]) -> str:
-    sources = sorted((ROOT / "ndt_cli" / "sim").glob("*.py"))
+def sim_key(params: object, modules: tuple[str, ...] | None = None) -> str:
+    """A cache key of simulated data: the sources of the simulator's ``modules``
+    (``ndt_cli/sim/<name>.py``; None: all of them) and the parameters' ``repr``."""
+    folder = ROOT / "ndt_cli" / "sim"
+    sources = (
+        sorted(folder.glob("*.py")) if modules is None else [folder / f"{m}.py" for m in modules]
+    )
     text = b"".join(f.read_bytes() for f in sources)
-    return hashlib.sha256(text + repr((N_SCANS, SEED, rays)).encode()).hexdigest()[:12]
+    return hashlib.sha256(text + repr(params).encode()).hexdigest()[:12]
+
+
+def _key(rays: dict[str, int]) -> str:
+    return sim_key((N_SCANS, SEED, rays))
 
 
 def street() -> tuple[list[Path], Path]:

@@ -6,7 +6,6 @@ The key holds the simulator's sources, so a changed simulator makes the scans ag
 
 from __future__ import annotations
 
-import hashlib
 import os
 import shutil
 from dataclasses import dataclass
@@ -14,10 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.data import CACHE, sim_key
 from ndt_cli import io, sim
-
-ROOT = Path(__file__).resolve().parents[1]
-CACHE = ROOT / "benchmarks" / ".cache"
 
 
 @dataclass(frozen=True)
@@ -28,15 +25,9 @@ class Order:
     poses: list[np.ndarray]
 
 
-def _key(n: int, seed: int, rays: tuple[int, int]) -> str:
-    sources = sorted((ROOT / "ndt_cli" / "sim").glob("*.py"))
-    text = b"".join(f.read_bytes() for f in sources)
-    return hashlib.sha256(text + repr((n, seed, rays)).encode()).hexdigest()[:12]
-
-
 def walk(n: int, seed: int, rays: tuple[int, int]) -> Order:
     """The route of ``n`` scans in walking order, their files with their times (made once)."""
-    folder = CACHE / f"route_{n}_{_key(n, seed, rays)}"
+    folder = CACHE / f"route_{n}_{sim_key((n, seed, rays))}"
     done = folder / "poses.npy"  # written last: the folder is complete
     if not done.exists():
         print(f"simulating {n} scans into {folder} (once) ...", flush=True)

@@ -14,13 +14,13 @@ is compared with its published ICP reference.
 
 from __future__ import annotations
 
-import hashlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks.data import sim_key
 from ndt_cli import io, sim
 from ndt_cli.analysis import trust
 from ndt_cli.config import Config
@@ -107,9 +107,7 @@ def cached(
     """The world's scans as LAS files and their true poses, simulated once: the cache is keyed
     by the sources of the simulator's ``modules`` (``ndt_cli/sim/<name>.py``) and the world's
     parameters (``repr``)."""
-    sources = [ROOT / "ndt_cli" / "sim" / f"{m}.py" for m in modules]
-    key = hashlib.sha256(b"".join(f.read_bytes() for f in sources) + repr(world).encode())
-    folder = CACHE / f"{prefix}{world.seed}_{key.hexdigest()[:12]}"
+    folder = CACHE / f"{prefix}{world.seed}_{sim_key(world, modules)}"
     poses_file = folder / "poses.npy"
     if poses_file.exists():
         poses = list(np.load(poses_file))
