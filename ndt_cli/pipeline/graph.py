@@ -28,7 +28,9 @@ class Edge:
     link's own quality gate passed (ok status). ``horizontal`` False: the link says nothing
     of where its scans are horizontally (degenerate; its rotation and height count).
     ``walked``: it joins neighbours along the walk (scans taken one after the other), whose
-    gate's word may stand where no other bridge's does (``quality.trust_walk_bridges``)."""
+    gate's word may stand where no other bridge's does (``quality.trust_walk_bridges``).
+    ``vouched``: trusted on the walk's word, its own gate having doubted it for its evidence
+    alone (:attr:`~ndt_cli.pipeline.links.Link.vouched`)."""
 
     target: int
     source: int
@@ -37,6 +39,7 @@ class Edge:
     trusted: bool = True
     horizontal: bool = True
     walked: bool = False
+    vouched: bool = False
 
     def __post_init__(self) -> None:
         T = np.asarray(self.T_target_source, dtype=float)

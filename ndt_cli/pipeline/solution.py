@@ -33,7 +33,7 @@ from ndt_cli.pipeline.link_use import firm, link_covariance, usable
 from ndt_cli.pipeline.links import Link
 from ndt_cli.pipeline.network import Bridges, LinkKind
 from ndt_cli.pipeline.verify import (
-    GATES_WORD,
+    WALKS_WORD,
     EdgeState,
     EdgeVerdict,
     NodeStatus,
@@ -286,16 +286,10 @@ def _fits(links: Sequence[Link], net: _Network) -> tuple[LinkFit, ...]:
             reason = f"{net.choices[k].reason}; {reason}"
         if links[k].status is Status.DEGENERATE and verdict.state is not EdgeState.REJECTED:
             reason += "; degenerate: only its rotation and height count"
-        if links[k].vouched:
-            reason = _vouched(reason)
+        if links[k].vouched and verdict.state is not EdgeState.USED:  # used: the walk's word
+            reason += f"; {WALKS_WORD}"
         fits[k] = LinkFit(verdict.state, verdict.residual, reason)
     return tuple(fits)
-
-
-def _vouched(reason: str) -> str:
-    """The network's reason for a link the walk vouched for: the walk's word, not its gate's."""
-    said = "vouched for by the walk (its gate doubted it for its evidence alone)"
-    return reason.replace(GATES_WORD, said) if GATES_WORD in reason else f"{reason}; {said}"
 
 
 def _edge(link: Link, walk: bool = False) -> Edge:
@@ -304,8 +298,8 @@ def _edge(link: Link, walk: bool = False) -> Edge:
     flat = link.status is Status.DEGENERATE  # where its scans are horizontally: unknown
     T, cov = r.T_reduced, link_covariance(r)
     walked = walk and link.kind is LinkKind.ADJACENT
-    trusted = link.ok or link.vouched
-    return Edge(link.target, link.source, T, cov, trusted, horizontal=not flat, walked=walked)
+    trusted, vouched = link.ok or link.vouched, link.vouched and not link.ok
+    return Edge(link.target, link.source, T, cov, trusted, not flat, walked, vouched)
 
 
 def _hypotheses(link: Link, k: int) -> list[Hypothesis]:

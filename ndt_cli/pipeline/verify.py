@@ -56,6 +56,8 @@ MAX_SIGMA_DEG = 0.2  # degrees: likewise for its heading
 
 GATES_WORD = "its gate's word"
 """Why a kept link no cycle checks is used: its gate passed it (see :func:`states`)."""
+WALKS_WORD = "vouched for by the walk (its gate doubted it for its evidence alone)"
+"""Why such a link is used when the walk vouched for it (:attr:`Edge.vouched`)."""
 
 
 class EdgeState(StrEnum):
@@ -297,11 +299,13 @@ class _Verifier:
                     f"a bridge (on no cycle of kept links that checks it) and {why}: not checkable"
                 )
                 out.append((EdgeState.UNUSED, text))
-            elif k in free and k in self.born_bridges:
-                out.append((EdgeState.USED, f"a bridge (on no cycle that checks it): {GATES_WORD}"))
             elif k in free:
-                text = "a bridge once links of its cycles were rejected: which was wrong is "
-                out.append((EdgeState.USED, f"{text}ambiguous; {GATES_WORD}"))
+                word = WALKS_WORD if self.edges[k].vouched else GATES_WORD
+                text = "a bridge (on no cycle that checks it): "
+                if k not in self.born_bridges:
+                    text = "a bridge once links of its cycles were rejected: which was wrong is "
+                    text += "ambiguous; "
+                out.append((EdgeState.USED, text + word))
             else:
                 chi2 = self.last[k].chi2 if k in self.last else float("nan")
                 text = f"on a cycle of kept links, chi2 {chi2:.4g} <= {self.threshold:.2f}"
