@@ -355,7 +355,8 @@ class QualityConfig:
     trust_walk_bridges: bool = key(
         True,
         "with trust_bridges false, a bridge between neighbours along the walk (scans taken one "
-        "after the other) may still tie a scan in on its own gate's word: the walk vouches for "
+        "after the other, or either side of one scan no ok link touches: a room seen only "
+        "through its door) may still tie a scan in on its own gate's word: the walk vouches for "
         "them, as it does outdoors; the wrong links that a gate passed indoors were between "
         "scans 13-26 m apart that the walk did not pair; false: no bridge at all",
     )

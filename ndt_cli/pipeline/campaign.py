@@ -59,7 +59,7 @@ from ndt_cli.pipeline.executors import Executor
 from ndt_cli.pipeline.guesses import relative
 from ndt_cli.pipeline.link_runner import LinkRunner
 from ndt_cli.pipeline.links import Link, LinkStore
-from ndt_cli.pipeline.members import Members, network_links
+from ndt_cli.pipeline.members import Members, network_links, walk_pairs
 from ndt_cli.pipeline.network import (
     Bridges,
     LinkKind,
@@ -195,7 +195,7 @@ class Campaign:
             radius=self.radius,
             hashes=tuple(None if h.startswith(UNREADABLE) else h for h in self.hashes),
             **self._world_system(solution),
-            tried=tried_links(self.tasks.tried, links, self.net.given, self.walk.adjacent),
+            tried=tried_links(self.tasks.tried, links, self.net.given, members.adjacent),
             samples={i: s.sample for i, s in sorted(self.summaries.items()) if s.sample},
         )
 
@@ -450,7 +450,7 @@ class Campaign:
     def _network(self) -> Members:
         """The links of the result (:func:`~ndt_cli.pipeline.members.network_links`)."""
         classic = (len(self.paths), self.unreadable) if self.net.classic else None
-        q, walk = self.cfg.quality, self.walk.adjacent
+        q, walk = self.cfg.quality, walk_pairs(self.walk, self.links, len(self.paths))
         weak = 0.0 if q.weak_links_join else q.min_kept_evidence
         vouch = (q.min_kept_evidence, q.walk_vouch_free_space if self.walked else 0.0)
         return network_links(self.links, self.plan, self.net.given, walk, classic, weak, vouch)

@@ -31,15 +31,18 @@ from ndt_cli.pipeline.link_use import (
 )
 from ndt_cli.pipeline.links import Link
 from ndt_cli.pipeline.network import LinkKind, Pair, classic_chain, kind_of
+from ndt_cli.pipeline.walk import Walk
 
 
 @dataclass(frozen=True)
 class Members:
-    """The links of a network, indexed 0, 1, ... in the order of their pairs, and the indices
-    of those the network may only check (never join groups by)."""
+    """The links of a network, indexed 0, 1, ... in the order of their pairs, the indices of
+    those the network may only check (never join groups by), and the pairs it took for
+    neighbours along the walk."""
 
     links: list[Link]
     checked_only: frozenset[int]
+    adjacent: frozenset[Pair] = frozenset()
 
 
 def network_links(
@@ -81,10 +84,19 @@ def network_links(
         _member(registered[p], n, kind_of(p, user, adjacent), vouch) for n, p in enumerate(chosen)
     ]
     only = frozenset(n for n, p in enumerate(chosen) if p in checked and not links[n].vouched)
-    return Members(links, only)
+    return Members(links, only, frozenset(adjacent))
 
 
 def _member(link: Link, index: int, kind: LinkKind, vouch: tuple[float, float]) -> Link:
     """The registered ``link`` as the network's ``index``-th, of ``kind``, vouched or not."""
     vouched = kind is LinkKind.ADJACENT and doubted_only_for_evidence(link, *vouch)
     return replace(link, index=index, kind=kind, vouched=vouched)
+
+
+def walk_pairs(walk: Walk, registered: Mapping[Pair, Link], n_scans: int) -> set[Pair]:
+    """The pairs of scans that are neighbours along the ``walk``
+    (:meth:`~ndt_cli.pipeline.walk.Walk.neighbours`) past the scans that no ``registered``
+    link its gate passed touches: a room scan seen only through its door and tied to neither
+    corridor scan beside it leaves those two neighbours, as taken one after the other."""
+    tied = {s for pair, link in registered.items() if link.ok for s in pair}
+    return walk.neighbours(set(range(n_scans)) - tied)

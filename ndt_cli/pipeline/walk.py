@@ -50,6 +50,16 @@ class Walk:
         """Pairs (lo, hi) of scans next to each other along the walk."""
         return {(min(a, b), max(a, b)) for a, b in zip(self.order, self.order[1:], strict=False)}
 
+    def neighbours(self, aside: Iterable[int] = ()) -> set[tuple[int, int]]:
+        """Pairs (lo, hi) of scans taken one after the other (:attr:`adjacent`), and of the
+        scans either side of one scan in ``aside`` (a scan that tied in nothing: a room seen
+        only through its door, taken between two standpoints along the corridor)."""
+        out, skip, order = self.adjacent, set(aside), self.order
+        for a, b, c in zip(order, order[1:], order[2:], strict=False):
+            if b in skip and a not in skip and c not in skip:
+                out.add((min(a, c), max(a, c)))
+        return out
+
     def beside(self, scan: int, offsets: Iterable[int]) -> list[int]:
         """The scans ``offsets`` places from ``scan`` along the walk (those that exist)."""
         k = self._rank[scan]
