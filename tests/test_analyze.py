@@ -29,6 +29,7 @@ def pair():
     return cfg, p, scans, truth
 
 
+@pytest.mark.slow
 def test_rotation_profile_peaks_at_zero_for_every_slice_count(pair):
     cfg, p, _, _ = pair
     rows = analyze.rotation_profile(p, cfg, cell=5.0, step_deg=2.0)

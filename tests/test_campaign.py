@@ -412,6 +412,7 @@ def test_a_pair_s_coarse_match_is_the_same_whichever_scan_came_first(tmp_path):
     np.testing.assert_allclose(found[0], np.linalg.inv(found[1]), rtol=0, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_scans_landing_one_by_one_out_of_time_order_are_walked_by_their_times(tmp_path):
     """Field mode's campaign fed a scan at a time, the files copied from the card in an order
     of their own: each new scan is matched first with its neighbours in time already there,

@@ -108,6 +108,7 @@ print(start_method())
 """
 
 
+@pytest.mark.slow
 def test_workers_are_forked_only_from_a_parent_with_one_thread(sequence):
     """Fork from a fresh process with Numba imported; from a fork server while another thread
     runs, and once a thread pool (here the LAZ decoder's) has run: a child forked from such a

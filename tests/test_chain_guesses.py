@@ -78,6 +78,7 @@ def test_approximate_poses_keep_every_scan_right_and_a_wrong_one_is_never_ok(tmp
         assert status != "ok" or (rot < ROT_DEG and trans < TRANS_M), (name, status, rot, trans)
 
 
+@pytest.mark.slow
 def test_a_bad_guess_file_is_one_line_before_any_scan_is_read(tmp_path):
     bad = tmp_path / "init.txt"
     bad.write_text("scan_00.laz 0 0 0 0\nscan_09.laz 1 2 3 4\n")

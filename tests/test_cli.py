@@ -52,6 +52,7 @@ def test_register_writes_all_outputs(pair, tmp_path):
     assert not list(out.glob("*.tmp*"))
 
 
+@pytest.mark.slow
 def test_json_on_stdout_and_config_and_init(pair, tmp_path):
     a, b, ref = pair
     cfg = tmp_path / "c.yaml"
@@ -69,6 +70,7 @@ def test_json_on_stdout_and_config_and_init(pair, tmp_path):
     assert "method: lm" in (tmp_path / "o" / "config_used.yaml").read_text()
 
 
+@pytest.mark.slow
 def test_init_sigma_sets_where_the_guess_starts_and_a_bad_one_is_one_line(pair, tmp_path):
     a, b, ref = pair
     init = tmp_path / "init.txt"

@@ -24,6 +24,7 @@ def sketches():
     return {k: sketch(prepare(pts, Config())) for k, pts in enumerate(route.scans)}
 
 
+@pytest.mark.slow
 def test_the_workers_give_every_pair_the_match_computed_here(sketches):
     pairs = [(a, b) for a in sketches for b in sketches if a < b]
     assert len(pairs) > 2 * BATCH_PAIRS  # several batches, the last one short
@@ -73,6 +74,7 @@ class _LosesBatch:
             yield key, (Failure("worker error: lost") if key == self.lost else task())
 
 
+@pytest.mark.slow
 def test_a_batch_whose_worker_was_lost_is_computed_here(sketches):
     pairs = [(a, b) for a in sketches for b in sketches if a < b]
     found = match_pairs(_LosesBatch(lost=1), sketches, pairs)

@@ -12,6 +12,7 @@ from concurrent.futures.process import _ExecutorManagerThread
 from functools import partial
 from pathlib import Path
 
+import pytest
 from conftest import added_task_order, after
 
 from ndt_cli.pipeline.executors import make_executor
@@ -23,11 +24,13 @@ def _die() -> None:
     os._exit(3)
 
 
+@pytest.mark.slow
 def test_a_task_added_by_a_result_runs_beside_the_slow_tasks_of_the_run():
     order = added_task_order(WorkerPool(2, threads=1))
     assert order == [("fast", "fast"), ("added", "added after fast"), ("slow", "slow")]
 
 
+@pytest.mark.slow
 def test_an_added_task_whose_worker_dies_fails_alone():
     pool = WorkerPool(2, threads=1)
     tasks = {"a": partial(after, "a", 0.0), "b": partial(after, "b", 1.0)}
@@ -77,6 +80,7 @@ def _touch_after(path: Path, seconds: float) -> str:
     return path.name
 
 
+@pytest.mark.slow
 def test_closing_waits_for_the_tasks_held_and_cancels_the_rest(tmp_path):
     """Python 3.11's exit hook writes to each pool's wake-up pipe while the pool's manager
     thread may be closing it (a traceback after the command's last line), and a worker killed
@@ -204,6 +208,7 @@ pool.close()
 """
 
 
+@pytest.mark.slow
 def test_a_script_without_the_main_guard_is_not_run_again_by_workers_of_its_workers(tmp_path):
     """A worker of a program that could not fork imports the program's main module. Without the
     ``if __name__ == "__main__":`` guard that runs the script again; it must not start workers

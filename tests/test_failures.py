@@ -106,6 +106,7 @@ def _copy(src: Path, dst: Path) -> Path:
     return dst
 
 
+@pytest.mark.slow
 def test_a_write_that_fails_midway_leaves_the_earlier_result_whole(
     first_result, tmp_path, monkeypatch
 ):

@@ -57,6 +57,7 @@ def test_every_readable_suffix_is_covered_here():
 
 
 @pytest.mark.parametrize("suffix", SUPPORTED_SUFFIXES)
+@pytest.mark.slow
 def test_a_pair_in_each_format_is_read_registered_and_exported(pair, suffix, tmp_path):
     scans, poses = pair
     files = [tmp_path / f"scan_{k}{suffix}" for k in range(2)]

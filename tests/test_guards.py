@@ -96,6 +96,7 @@ def _text(path: Path, text: str) -> Path:
 
 
 @pytest.mark.parametrize("case", sorted(BAD_SCANS))
+@pytest.mark.slow
 def test_a_bad_scan_among_good_ones_is_exit_2_before_any_work(case, street, tmp_path):
     make, needle = BAD_SCANS[case]
     bad = make(tmp_path)
@@ -151,6 +152,7 @@ def test_an_anchor_in_other_digits_is_one_line(street, tmp_path):
 
 
 @pytest.mark.parametrize("how", ["centimetres", "an id column first"])
+@pytest.mark.slow
 def test_a_scan_in_other_units_is_refused_at_once(how, tmp_path):
     """A scan's points crowd around it; in centimetres, or with an id as x, they spread over
     kilometres, and registering them took minutes and gigabytes (or a 31 GB allocation)."""
@@ -234,6 +236,7 @@ def test_a_lock_left_by_a_killed_run_is_no_obstacle(tmp_path):
         pass
 
 
+@pytest.mark.slow
 def test_a_lock_whose_run_is_gone_is_waited_for_while_its_last_process_exits(tmp_path):
     """A run killed with its workers: the lock names a process that is gone, while another of
     its processes still holds it for a moment. The next run waits and takes it."""

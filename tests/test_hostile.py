@@ -268,6 +268,7 @@ def _with_stray_point(src: Path, dst: Path, where: np.ndarray | None) -> None:
     [(250_000.0, 3_000.0, 10.0), (20_000.0, -500.0, 2.0), (0.0, 1e6, -1e6), None, 1e12],
     ids=["250km", "20km", "1000km", "int32-max-record", "1e12m-xyz"],
 )
+@pytest.mark.slow
 def test_one_stray_point_far_away_neither_hangs_nor_fails_a_good_pair(pair, tmp_path, where):
     """D15, D22: one point far from the scanner (a glitch, a "no return" record) is left out:
     the pair registers as without it, in bounded time, without a traceback."""

@@ -495,6 +495,7 @@ def _fits_the_screen(pg: Any, width: int) -> None:
     assert stacked["hidden"] == stacked["labelled"] == (width < 720), (width, stacked)
 
 
+@pytest.mark.slow
 def test_page_in_real_browser(tmp_path: Path, png: bytes) -> None:
     from PIL import Image
 

@@ -63,6 +63,7 @@ def _triangles_by_loop(points: np.ndarray) -> set[tuple[int, int, int]]:
     return out
 
 
+@pytest.mark.slow
 def test_triangle_keys_are_every_triangle_in_range_and_do_not_turn_with_the_scan():
     rng = np.random.default_rng(2)
     points = rng.uniform(-40.0, 40.0, (30, 2))
@@ -78,6 +79,7 @@ def test_triangle_keys_are_every_triangle_in_range_and_do_not_turn_with_the_scan
         assert any(max(abs(k - np.array(m))) <= 1 for m in moved), k
 
 
+@pytest.mark.slow
 def test_the_index_ranks_first_the_scans_that_saw_the_same_objects():
     """Four scans of a field of posts, each seeing those within 30 m of it, in frames turned
     and moved at random, with 3 cm of noise: each ranks first the scan nearest it."""

@@ -60,6 +60,7 @@ def _runner(tmp_path: Path, files: list[Path]) -> LinkRunner:
 
 
 @pytest.mark.parametrize("scans_kept", [0, 2])
+@pytest.mark.slow
 def test_kept_scans_fit_the_budget_and_links_read_forgotten_scans_again(
     tmp_path, monkeypatch, scans_kept
 ):

@@ -67,6 +67,7 @@ def _corridor(n: int, free_last: bool) -> tuple[gtsam.NonlinearFactorGraph, gtsa
     return graph, values
 
 
+@pytest.mark.slow
 def test_a_long_corridor_keeps_its_determined_scans_determined():
     """Four hundred scans (6.4 km) and the last one free along x: the fallback gives the other
     scans GTSAM's covariances, not hundreds of metres (the anchor's prior beside a corridor's

@@ -132,6 +132,7 @@ def test_scans_of_one_stem_get_a_pose_file_each(tmp_path):
         assert rot < 0.1 and trans < 0.05, (name, rot, trans)
 
 
+@pytest.mark.slow
 def test_names_with_spaces_are_read_back_by_ndt_eval(tmp_path):
     names = {"Scan 00.laz": "scan_00.laz", "Scan 01.laz": "scan_01.laz"}
     out = tmp_path / "out"
@@ -146,6 +147,7 @@ def test_names_with_spaces_are_read_back_by_ndt_eval(tmp_path):
     assert json.loads(res.stdout)["links"][0]["translation_error_m"] < 0.05
 
 
+@pytest.mark.slow
 def test_long_legal_names_never_fail_the_outputs(tmp_path):
     names = {f"{k}_" + "L" * 200 + ".laz": f"scan_0{k}.laz" for k in range(2)}
     out = tmp_path / "out"
@@ -155,6 +157,7 @@ def test_long_legal_names_never_fail_the_outputs(tmp_path):
     assert len(list(out.glob("T_*.txt"))) == 1
 
 
+@pytest.mark.slow
 def test_a_file_name_that_is_not_utf8_goes_through_register_and_export(tmp_path):
     odd = os.fsdecode(b"a_\xff\xfe.laz")
     files = renamed(tmp_path / "s", {odd: "scan_00.laz", "b.laz": "scan_01.laz"})
@@ -188,6 +191,7 @@ def test_a_failure_while_publishing_leaves_no_staging_folder(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_bidi_controls_in_a_name_cannot_reverse_the_report(tmp_path):
     evil = "b_\u202eevil.laz"
     files = renamed(tmp_path / "s", {"a.laz": "scan_00.laz", evil: "scan_01.laz"})

@@ -227,6 +227,7 @@ def test_a_byte_order_mark_before_the_first_pair_is_read(tmp_path):
     assert [(k.target, k.source) for k in read_pairs(f, NAMES)] == [(0, 3)]
 
 
+@pytest.mark.slow
 def test_memory_grows_with_the_distinct_pairs_not_the_rows(tmp_path):
     import tracemalloc
 

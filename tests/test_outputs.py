@@ -59,6 +59,7 @@ def _copy(result: Path, dst: Path) -> Path:
     ("kept", "needle"),
     [("scans", "must not be, hold or lie inside an input"), ("notes", "did not write")],
 )
+@pytest.mark.slow
 def test_a_rerun_into_a_result_folder_never_deletes_the_users_files(
     pair_result, tmp_path, kept, needle
 ):
@@ -73,6 +74,7 @@ def test_a_rerun_into_a_result_folder_never_deletes_the_users_files(
     assert tree(out) == before
 
 
+@pytest.mark.slow
 def test_a_file_added_inside_a_result_subfolder_is_foreign_too(tmp_path):
     scans = copies(tmp_path / "scans", "scan_00.laz", "scan_01.laz")
     out = tmp_path / "chain"

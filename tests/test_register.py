@@ -44,6 +44,7 @@ def relative(poses, i, j):
         pytest.param("lm", marks=pytest.mark.slow),
     ],
 )
+@pytest.mark.slow
 def test_recovers_every_link_of_a_street_with_each_optimizer(street, method):
     scans, poses = street
     cfg = Config().replace(optimizer={"method": method})
@@ -56,6 +57,7 @@ def test_recovers_every_link_of_a_street_with_each_optimizer(street, method):
         assert abs(result.T_target_source[2, 3] - ref[2, 3]) < 0.05  # ground difference as tz
 
 
+@pytest.mark.slow
 def test_recovers_a_40_m_link():
     _, scans, poses = sim.make_sequence(seed=5, n_scans=2, spacing=(39.0, 40.0))
     ref = relative(poses, 0, 1)
@@ -87,6 +89,7 @@ def test_georeferenced_coordinates_register_as_accurately_as_local_ones(street):
     assert abs(err_geo - err_local) < 0.005, (err_geo, err_local)
 
 
+@pytest.mark.slow
 def test_initial_guess_skips_the_search_and_the_cells_coarser_than_its_uncertainty(street):
     scans, poses = street
     ref = relative(poses, 1, 2)

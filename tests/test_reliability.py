@@ -121,6 +121,7 @@ def test_bad_input_is_one_line_exit_2_no_traceback_no_output(case, scans, tmp_pa
         ("slices:\n  heights: [500.0]\n", "no points in any slice"),
     ],
 )
+@pytest.mark.slow
 def test_bad_config_is_exit_2_and_keeps_earlier_results(yaml_text, needle, scans, tmp_path):
     a = _points(tmp_path / "a.laz", scans[0][0])
     b = _points(tmp_path / "b.laz", scans[0][1])
@@ -237,6 +238,7 @@ class _BreaksAfterOneResult:
         self.pool.close()
 
 
+@pytest.mark.slow
 def test_an_error_in_the_run_closes_the_workers(scans, tmp_path):
     pts, _ = scans
     files = [_points(tmp_path / f"s{i}.laz", p) for i, p in enumerate(pts)]

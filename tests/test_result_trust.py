@@ -77,6 +77,7 @@ def refused(res, out: Path, needle: str = "") -> None:
 # --- D1: a scan file replaced after the registration -------------------------------------------
 
 
+@pytest.mark.slow
 def test_a_scan_file_swapped_after_registration_is_refused(chain_result, tmp_path):
     scans = chain_result.parent / "scans"
     a, b = scans / "scan_01.laz", scans / "scan_02.laz"
@@ -209,6 +210,7 @@ DAMAGED_PAIR = {
 
 
 @pytest.mark.parametrize("case", sorted(DAMAGED_CHAIN) + sorted(DAMAGED_PAIR))
+@pytest.mark.slow
 def test_a_damaged_result_folder_is_one_line(chain_result, pair_result, tmp_path, case):
     result, edit = (
         (chain_result, DAMAGED_CHAIN[case])
@@ -244,6 +246,7 @@ def test_a_source_without_overlap_is_never_exported_as_suspect(tmp_path):
     assert data["points_written"] == len(np.loadtxt(a))
 
 
+@pytest.mark.slow
 def test_two_scans_of_one_file_name_in_two_folders_export(tmp_path):
     for side, scan in (("north", "scan_00.laz"), ("south", "scan_01.laz")):
         (tmp_path / side).mkdir()

@@ -27,6 +27,7 @@ def _local(world: DistrictWorld, xy: np.ndarray) -> np.ndarray:
     return xy @ np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
 
 
+@pytest.mark.slow
 def test_the_walk_goes_round_the_ring_and_through_the_middle_street(district):
     _, _, poses = district
     xy = _local(WORLD, np.array([T[:2, 3] for T in poses]))
@@ -69,6 +70,7 @@ def test_the_crossings_are_open_and_the_streets_run_at_the_grids_heading():
     assert np.allclose(np.sort(yaw), [30.0, 120.0])
 
 
+@pytest.mark.slow
 def test_points_lie_on_the_scenes_surfaces():
     exact = replace(WORLD, blocks=(1, 2), pitch=(44.0, 44.0), spacing=30.0, range_noise=0.0)
     scene, scans, poses = scan_district(exact)
@@ -82,6 +84,7 @@ def test_points_lie_on_the_scenes_surfaces():
         assert not within_reach(scene, T[:2, 3]).contains(some, margin=1e-6).any()
 
 
+@pytest.mark.slow
 def test_scanners_stand_on_the_sloping_ground_people_and_traffic_move(district):
     scene, _, poses = district
     for T in poses:

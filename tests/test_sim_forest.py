@@ -36,6 +36,7 @@ def _in_crown(scene, p: np.ndarray) -> np.ndarray:
     return inside
 
 
+@pytest.mark.slow
 def test_points_lie_on_the_scenes_surfaces_or_in_its_foliage():
     world = ForestWorld(seed=5, slope=0.1, slope_deg=300.0, shape=(1, 2), rays=SMALL)
     scene, _ = forest_scene(world)
@@ -50,6 +51,7 @@ def test_points_lie_on_the_scenes_surfaces_or_in_its_foliage():
         assert on_solid.sum() > 100 and on_ground.sum() > 0.2 * len(p)
 
 
+@pytest.mark.slow
 def test_the_ground_slopes_as_asked(plot):
     _, _, _, scans, poses = plot
     p = np.vstack(_world_points(scans, poses))

@@ -302,6 +302,7 @@ def small_pair():
     return scans, poses, cfg
 
 
+@pytest.mark.slow
 def test_preparing_on_the_numpy_twins_gives_the_same_slices(small_pair):
     scans, _, _ = small_pair
     fast, slow = (load_and_prepare(scans[0], Config(), k) for k in (NUMBA, NUMPY))

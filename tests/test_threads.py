@@ -122,6 +122,7 @@ print(interrupted)
 """
 
 
+@pytest.mark.slow
 def test_ctrl_c_while_helper_threads_start_never_holds_up_the_exit():
     """Ctrl-C lands again and again while the loop's helper threads start: the process is
     interrupted, and it ends (a thread started but not recorded by its pool, as a Ctrl-C

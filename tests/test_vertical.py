@@ -79,6 +79,7 @@ def test_too_few_walls_leave_the_vertical_to_the_ground():
     assert _angle(v.up, [-0.02, 0.0, 1.0]) < 0.05
 
 
+@pytest.mark.slow
 def test_simulated_sloping_streets_get_their_vertical_within_three_hundredths_of_a_degree():
     errors = []
     for seed, world in enumerate(
