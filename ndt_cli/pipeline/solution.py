@@ -298,8 +298,8 @@ def _edge(link: Link, walk: bool = False) -> Edge:
     flat = link.status is Status.DEGENERATE  # where its scans are horizontally: unknown
     T, cov = r.T_reduced, link_covariance(r)
     walked = walk and link.kind is LinkKind.ADJACENT
-    trusted, vouched = link.ok or link.vouched, link.vouched and not link.ok
-    return Edge(link.target, link.source, T, cov, trusted, not flat, walked, vouched)
+    trusted = link.ok or link.vouched  # a vouched link is a suspect one (its gate doubted it)
+    return Edge(link.target, link.source, T, cov, trusted, not flat, walked, link.vouched)
 
 
 def _hypotheses(link: Link, k: int) -> list[Hypothesis]:

@@ -58,6 +58,8 @@ GATES_WORD = "its gate's word"
 """Why a kept link no cycle checks is used: its gate passed it (see :func:`states`)."""
 WALKS_WORD = "vouched for by the walk (its gate doubted it for its evidence alone)"
 """Why such a link is used when the walk vouched for it (:attr:`Edge.vouched`)."""
+BORN_BRIDGE = "a bridge (on no cycle that checks it): "
+LEFT_BRIDGE = "a bridge once links of its cycles were rejected: which was wrong is ambiguous; "
 
 
 class EdgeState(StrEnum):
@@ -301,10 +303,7 @@ class _Verifier:
                 out.append((EdgeState.UNUSED, text))
             elif k in free:
                 word = WALKS_WORD if self.edges[k].vouched else GATES_WORD
-                text = "a bridge (on no cycle that checks it): "
-                if k not in self.born_bridges:
-                    text = "a bridge once links of its cycles were rejected: which was wrong is "
-                    text += "ambiguous; "
+                text = BORN_BRIDGE if k in self.born_bridges else LEFT_BRIDGE
                 out.append((EdgeState.USED, text + word))
             else:
                 chi2 = self.last[k].chi2 if k in self.last else float("nan")
