@@ -11,6 +11,10 @@ RUN_VENV := .venv-run
 
 .PHONY: demo test test-fast bench trust lint sample-data clean
 
+# the report's browser test opens it in Debian's Chromium: installed here when it is missing and
+# this machine lets make install it (root, with apt-get); otherwise the test names what to install
+CHROMIUM := /usr/bin/chromium
+
 $(STAMP): pyproject.toml
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "$(PYTHON) not found (set PYTHON=...)"; exit 2; }
 	$(PYTHON) -m venv $(VENV)
@@ -18,6 +22,12 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet --no-compile -e ".[dev]"
 	$(BIN)/python -m compileall -q -j 0 $(VENV)/lib >/dev/null
 	@touch $(STAMP)
+
+$(CHROMIUM):
+	@if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+		echo "installing Debian's chromium for the report's browser test"; \
+		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; \
+	else echo "$(CHROMIUM) missing: the browser test needs it (Debian: apt-get install chromium)"; fi
 
 demo: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(BIN)/ndt-register sample_data/scan_00.laz sample_data/scan_01.laz --out ndt_results/pair
@@ -29,7 +39,7 @@ demo: $(STAMP)
 
 # two test processes, a test file each at a time (its module fixtures made once): many tests
 # wait on processes they start, so two share the cores well even on a machine with two
-test: $(STAMP)
+test: $(STAMP) $(CHROMIUM)
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q -n 2 --dist loadfile --durations=20
 
 test-fast: $(STAMP)
