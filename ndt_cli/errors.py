@@ -6,6 +6,8 @@ stored on its class; anything else is a bug and keeps its traceback.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 EXIT_OK = 0
@@ -85,3 +87,15 @@ class UserInterruptError(NdtError):
     """Stopped by Ctrl-C / SIGINT; what finished is kept (``ndt-chain --resume`` continues)."""
 
     exit_code = EXIT_INTERRUPTED
+
+
+@contextmanager
+def interrupt_as(message: Callable[[], str]) -> Iterator[None]:
+    """Ctrl-C inside (:func:`caused_by_interrupt`) raised as one :class:`UserInterruptError`
+    of ``message()``, said when it happens; any other error passes unchanged."""
+    try:
+        yield
+    except BaseException as exc:
+        if not caused_by_interrupt(exc):
+            raise
+        raise UserInterruptError(message()) from None

@@ -340,7 +340,7 @@ def test_scans_placed_out_of_order_are_matched_coarsely_only_where_no_position_i
             campaign._place_by_matches(new)
         assert campaign.coarse and all(set(p) & blind for p in campaign.coarse)
         assert {p for p in campaign.coarse if 10 in p} == {(k, 10) for k in range(10)}
-        assert any("placed by no landmark" in r.getMessage() for r in caplog.records)
+        assert any("alone: matched with the next by rank" in r.getMessage() for r in caplog.records)
         turned = set(campaign.tasks.turned)
         campaign._bridge(new)
         assert campaign.tasks.turned == turned  # no bridge is trusted: none turned round

@@ -15,7 +15,14 @@ from ndt_cli import sim
 from ndt_cli.config import Config
 from ndt_cli.ndt.landmarks import KEY_STEP, LONGEST, SHORTEST, landmarks, triangle_keys
 from ndt_cli.pipeline import links, placement
-from ndt_cli.pipeline.candidates import CANDIDATES, MIN_KEYS, LandmarkIndex, shortlists
+from ndt_cli.pipeline.candidates import (
+    CANDIDATES,
+    MIN_KEYS,
+    WIDER,
+    LandmarkIndex,
+    next_tier,
+    shortlists,
+)
 from ndt_cli.pipeline.discovery import Placed
 from ndt_cli.pipeline.links import LinkStore
 from ndt_cli.pipeline.tasks import prepare_scan, summarise_scan
@@ -105,6 +112,41 @@ def test_a_scan_the_index_does_not_know_is_listed_with_every_scan():
     index.add(1, np.array([[10, 20, 30]]))
     assert not index.knows(0) and not index.knows(1)
     assert shortlists(index, [0, 1], [0, 1, 2, 3]) == {0: [1, 2, 3], 1: [0, 2, 3]}
+
+
+def _tiered_index(sharers: int, strangers: int) -> LandmarkIndex:
+    """Scan 0 with 100 triangles; scan i of 1..``sharers`` holds the first 100 - i of them
+    (so the index ranks them 1, 2, 3, ...); then ``strangers`` scans sharing none."""
+    mine = np.array([[10 * j + 5, 7, 9] for j in range(100)], dtype=np.int64)
+    keys = {0: mine} | {i: mine[: 100 - i] for i in range(1, sharers + 1)}
+    far = np.array([[5000 + 10 * j, 7, 9] for j in range(30)], dtype=np.int64)
+    return LandmarkIndex(keys | {sharers + 1 + i: far for i in range(strangers)})
+
+
+def test_a_scan_left_alone_is_matched_with_the_next_tier_by_rank_then_with_the_rest():
+    """80 scans share triangles with scan 0 in a known order, 4 share none: scan 0 is listed
+    with the first 16 by rank, then the next up to 64, then up to 256 (the 16 sharers left),
+    then the 4 strangers; with all tried, not at all."""
+    assert (CANDIDATES, *WIDER) == (16, 64, 256)
+    index, every = _tiered_index(80, 4), list(range(85))
+    tried: dict[int, list[int]] = {}
+    tiers = []
+    while lists := next_tier(index, [0], every, tried):
+        tiers.append(lists[0])
+        tried = {0: [*tried.get(0, []), *lists[0]]}
+    assert tiers == [
+        list(range(1, 17)),
+        list(range(17, 65)),
+        list(range(65, 81)),
+        list(range(81, 85)),
+    ]
+
+
+def test_a_scan_the_index_does_not_know_is_matched_with_every_scan_at_once():
+    index = LandmarkIndex({0: np.zeros((0, 3), dtype=np.int64)})
+    assert next_tier(index, [0], [0, 1, 2, 3], {}) == {0: [1, 2, 3]}
+    assert next_tier(index, [0], [0, 1, 2, 3], {0: [3, 1, 2]}) == {}
+    assert next_tier(index, [0], [0, 1, 2, 3], {0: [1]}) == {0: [2, 3]}
 
 
 def test_a_scan_is_alone_in_a_group_of_its_own_or_unplaced():

@@ -26,8 +26,8 @@ from __future__ import annotations
 
 import logging
 from collections import Counter
-from collections.abc import Callable, Iterable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Iterable, Sequence
+from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
 
@@ -36,11 +36,11 @@ import numpy as np
 from ndt_cli import io
 from ndt_cli.config.loading import dump
 from ndt_cli.config.schema import Config
-from ndt_cli.errors import UserInterruptError, caused_by_interrupt
+from ndt_cli.errors import interrupt_as
 from ndt_cli.ndt.overlap import CoarseMatch, coarse_match
 from ndt_cli.pipeline import placement
 from ndt_cli.pipeline.by_control import frame_of, home_group, station_links
-from ndt_cli.pipeline.candidates import LandmarkIndex, shortlists
+from ndt_cli.pipeline.candidates import LandmarkIndex, next_tier, shortlists
 from ndt_cli.pipeline.coarse import keyed, match_pairs, partners, seen_from
 from ndt_cli.pipeline.control import matched
 from ndt_cli.pipeline.datum import log_unused_controls
@@ -261,21 +261,25 @@ class Campaign:
                 hinted.append(outcome)
 
     def _place_by_matches(self, todo: list[int]) -> None:
-        """Place ``todo`` all at once, in one batch: each scan registered to the scans near it
-        by known positions, or without any, to its best coarse matches among the scans its
-        landmarks rank first (:func:`~ndt_cli.pipeline.candidates.shortlists`); a scan left
-        alone then to its best among all. Not one at a time beside the scans placed: a scan
-        whose neighbours were not placed yet has a wrong best match (a street fits itself
-        shifted), and paid five or six registrations before it was alone."""
+        """Place ``todo`` in one batch: each scan registered to the scans near it by known
+        positions, or without any, to its best coarse matches among those its landmarks rank
+        first; one left alone, among the next by rank (:func:`next_tier`). Not one at a time:
+        a scan whose neighbours were not placed yet fits a street shifted along itself."""
         every = sorted(set(self.where) | set(todo))
         near = {scan: self._near(scan, [o for o in every if o != scan]) for scan in todo}
         self.index.update({k: self.summaries[k].sketch.keys for k in every})
         blind = [scan for scan in todo if not near[scan]]
-        self._register_to_matches(every, near, shortlists(self.index, blind, every))
-        alone = [s for s in blind if placement.alone(s, self.where)]
-        if alone:
-            progress.info("%d scan(s) placed by no landmark: matched with every scan", len(alone))
-            self._register_to_matches(every, {}, {s: [o for o in every if o != s] for s in alone})
+        tried: dict[int, list[int]] = {}
+        lists = next_tier(self.index, blind, every, tried)
+        while True:
+            self._register_to_matches(every, near, lists)
+            near = {}
+            tried = {s: [*tried.get(s, []), *others] for s, others in lists.items()}
+            left = [s for s in lists if placement.alone(s, self.where)]
+            lists = next_tier(self.index, left, every, tried)
+            if not lists:
+                return
+            progress.info("%d scan(s) alone: matched with the next by rank", len(lists))
 
     def _register_to_matches(self, every: list[int], near: Lists, candidates: Lists) -> None:
         """Register each scan to those ``near`` it and to its best coarse matches among its
@@ -485,15 +489,11 @@ class Campaign:
             self.coarse.update([keyed(m, t, s)])
         return seen_from(self.coarse, a, b)
 
-    @contextmanager
-    def _stopping(self) -> Iterator[None]:
+    def _stopping(self) -> AbstractContextManager[None]:
         """On Ctrl-C, what finished is kept: one line saying so."""
-        try:
-            yield
-        except BaseException as exc:
-            if not caused_by_interrupt(exc):
-                raise
-            raise UserInterruptError(
-                f"interrupted: {len(self.links)} finished link(s) kept in {self.store.folder}; "
-                f"{self.on_interrupt} to continue"
-            ) from None
+        return interrupt_as(
+            lambda: (
+                f"interrupted: {len(self.links)} finished link(s) kept in "
+                f"{self.store.folder}; {self.on_interrupt} to continue"
+            )
+        )

@@ -5,7 +5,8 @@ A scan placed out of order was matched coarsely with every other scan, quadratic
 :class:`LandmarkIndex` ranks the others by the triangles of landmarks they share with it (a
 side may differ by one :data:`~ndt_cli.ndt.landmarks.KEY_STEP`), so that only the best few
 are matched. It is a ranking for the cost's sake: the coarse matches, the registrations and
-the network decide, and a scan the index finds nothing for is matched with every scan.
+the network decide. A scan its first candidates do not place is matched with the next ones
+by rank (:data:`WIDER`), and one the index finds nothing for with every scan.
 """
 
 from __future__ import annotations
@@ -17,6 +18,9 @@ from collections.abc import Iterable, Mapping, Sequence
 import numpy as np
 
 CANDIDATES = 16  # scans per scan matched coarsely (out of order, without a position)
+# the next tiers by rank, for a scan its first candidates leave alone: on a long uniform street
+# a neighbour may rank below the first 16, and every scan cost a thousand coarse matches
+WIDER = (4 * CANDIDATES, 16 * CANDIDATES)
 MIN_KEYS = 20  # triangles a scan needs for its ranking to mean anything
 _NEAR = np.array(list(itertools.product((-1, 0, 1), repeat=3)), dtype=np.int64)
 
@@ -81,4 +85,28 @@ def shortlists(
     for scan in scans:
         others = [o for o in every if o != scan]
         out[scan] = index.ranked(scan, others, k) if index.knows(scan) else others
+    return out
+
+
+def next_tier(
+    index: LandmarkIndex,
+    scans: Iterable[int],
+    every: Sequence[int],
+    tried: Mapping[int, Iterable[int]],
+) -> dict[int, list[int]]:
+    """Per scan of ``scans``, the scans of ``every`` to match it with next, leaving out those
+    it was ``tried`` with: the first tier by rank (:data:`CANDIDATES`, then :data:`WIDER`)
+    that holds one not tried, else every scan not tried; a scan with none left: not listed.
+    A scan the index does not know (:meth:`LandmarkIndex.knows`): every scan at once."""
+    out = {}
+    for scan in scans:
+        done = set(tried.get(scan, ()))
+        others = [o for o in every if o != scan and o not in done]
+        for k in (CANDIDATES, *WIDER) if index.knows(scan) else ():
+            ranked = [o for o in index.ranked(scan, every, k) if o not in done]
+            if ranked:
+                others = ranked
+                break
+        if others:
+            out[scan] = others
     return out
