@@ -177,7 +177,9 @@ def ndt_covariance(
 
 def sqrt_information(covariance: np.ndarray) -> np.ndarray:
     """6x6 ``R`` with ``R.T @ R == inv(covariance)``: ``|R @ xi|**2`` is the chi-square of
-    ``xi``. From the eigen-decomposition, so a badly conditioned covariance is no problem.
+    ``xi``. From the eigen-decomposition, so a badly conditioned covariance is no problem; the
+    symmetric root ``V diag(lam**-0.5) V.T``, positive definite whatever signs the eigenvectors
+    come with (a diagonal ``R`` is read as sigmas, which must be positive).
     Also for a stack (N,6,6) -> (N,6,6). Raises ValueError unless every covariance is finite,
     symmetric and positive definite."""
     C = np.asarray(covariance, dtype=float)
@@ -188,7 +190,7 @@ def sqrt_information(covariance: np.ndarray) -> np.ndarray:
     asym = np.abs(C - sym).max(axis=(-2, -1))
     if np.any(lam[..., 0] <= 0.0) or np.any(asym > 1e-9 * lam[..., -1]):
         raise ValueError("a link covariance must be symmetric positive definite (add a floor)")
-    return np.swapaxes(V / np.sqrt(lam)[..., None, :], -1, -2)
+    return (V / np.sqrt(lam)[..., None, :]) @ np.swapaxes(V, -1, -2)
 
 
 def rotation_log(R: np.ndarray) -> np.ndarray:
