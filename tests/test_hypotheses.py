@@ -210,6 +210,7 @@ def test_the_network_holds_probes_with_rivals_only_to_check_them():
     member; the classic chain holds its chain whatever each link is."""
     from ndt_cli.ndt.result import Rival, Status
     from ndt_cli.pipeline.members import network_links
+    from ndt_cli.pipeline.network import LinkKind
 
     rival = Rival(np.eye(4), np.eye(3), 0.6, 0.0, "a pose slid 0.5 m")
     weak = np.array([1.0, 0.0, 0.0])
@@ -225,11 +226,13 @@ def test_the_network_holds_probes_with_rivals_only_to_check_them():
         (a, b): replace(_registered(status, **fields), target=a, source=b)
         for (a, b), (status, fields) in made.items()
     }
-    members = network_links(registered, {(0, 1), (1, 2)}, set(), {(0, 1), (1, 2)})
+    members = network_links(
+        registered, {(0, 1), (1, 2)}, set(), dict.fromkeys([(0, 1), (1, 2)], LinkKind.ADJACENT)
+    )
     pairs = [(k.target, k.source) for k in members.links]
     assert pairs == [(0, 1), (0, 2), (1, 2), (1, 3)]
     assert [k.index for k in members.links] == [0, 1, 2, 3]
     assert members.checked_only == {1}
-    classic = network_links(registered, set(), set(), set(), classic=(4, ()))
+    classic = network_links(registered, set(), set(), {}, classic=(4, ()))
     assert [(k.target, k.source) for k in classic.links] == [(0, 1), (1, 2), (2, 3)]
     assert not classic.checked_only

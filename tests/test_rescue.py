@@ -111,7 +111,7 @@ def test_a_probe_leaves_the_deeper_search_to_the_plan(tmp_path):
     # the outputs say why the probe is not the network's link, and tell it from the other way
     link = Link(0, 0, 1, "full", deep)
     tried = [Link(1, 0, 1, "probe", probe), Link(2, 1, 0, "reverse", probe)]
-    why = [t.why for t in tried_links(tried, [link], set(), set())]
+    why = [t.why for t in tried_links(tried, [link], set(), {})]
     assert why == [Dropped.SEARCHED_AGAIN, Dropped.OTHER_WAY]
     # a probe with a guess near the truth: the guess's result is kept (ok, at the truth), but
     # the search skipped its deeper round: stored as a probe, never taken for the full link

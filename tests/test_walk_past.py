@@ -55,7 +55,8 @@ def test_the_walk_passes_one_scan_set_aside_and_no_more():
 def test_only_a_scan_no_ok_link_touches_is_passed():
     walk = _walk(5)
     corridor = {(0, 1): _link(0, 1), (3, 4): _link(3, 4)}
-    assert (1, 3) in walk_pairs(walk, corridor, 5)  # scan 2 registered to nothing at all
+    assert walk_pairs(walk, corridor, 5)[(1, 3)] is LinkKind.PAST  # 2 registered to nothing
+    assert walk_pairs(walk, corridor, 5)[(0, 1)] is LinkKind.ADJACENT
     lonely = {**corridor, (1, 2): _link(1, 2, Status.SUSPECT), (2, 3): _link(2, 3, Status.FAILED)}
     assert (1, 3) in walk_pairs(walk, lonely, 5)
     tied = {**lonely, (2, 4): _link(2, 4)}  # the room scan tied in elsewhere
@@ -74,14 +75,14 @@ def _campaign_links(room_tied: bool) -> list:
         (3, 4): _link(3, 4),
     }
     walk = _walk(5)
-    adjacent = walk_pairs(walk, registered, 5)
-    return network_links(registered, set(registered), set(), adjacent)
+    return network_links(registered, set(registered), set(), walk_pairs(walk, registered, 5))
 
 
 def test_indoors_the_corridor_past_an_untied_room_scan_is_ok_and_right():
     members = _campaign_links(room_tied=False)
     kinds = {(k.target, k.source): k.kind for k in members.links}
-    assert kinds[(1, 3)] is LinkKind.ADJACENT and members.adjacent >= {(1, 3)}
+    assert kinds[(1, 3)] is LinkKind.PAST and members.walk[(1, 3)] is LinkKind.PAST
+    assert kinds[(0, 1)] is kinds[(3, 4)] is LinkKind.ADJACENT
     solution = solve(5, 0, members.links, True, {}, bridges=Bridges.WALK)
     statuses = [s.status for s in solution.scans]
     assert statuses == [NodeStatus.OK, NodeStatus.OK, statuses[2], NodeStatus.OK, NodeStatus.OK]

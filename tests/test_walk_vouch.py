@@ -30,6 +30,7 @@ SLID = (
     "be a pose slid along the scene",
 )
 VOUCH = (0.7, 0.0005)  # min_kept_evidence, walk_vouch_free_space as indoors
+WALK = {(0, 1): LinkKind.ADJACENT}  # the neighbours along the walk
 
 
 def _slid(status: Status = Status.SUSPECT, **fields):
@@ -57,11 +58,11 @@ def test_the_network_vouches_only_for_walk_neighbours_and_then_does_not_merely_c
     """Pairs (0, 1) neighbours along the walk and (0, 2) found: both doubted for the evidence
     alone; the walk's is vouched for and joins groups, the found one is only checked."""
     registered = {p: replace(_slid(), target=p[0], source=p[1]) for p in ((0, 1), (0, 2))}
-    members = network_links(registered, set(registered), set(), {(0, 1)}, weak=0.7, vouch=VOUCH)
+    members = network_links(registered, set(registered), set(), WALK, weak=0.7, vouch=VOUCH)
     kinds = [(k.kind, k.vouched) for k in members.links]
     assert kinds == [(LinkKind.ADJACENT, True), (LinkKind.FOUND, False)]
     assert members.checked_only == {1}
-    off = network_links(registered, set(registered), set(), {(0, 1)}, weak=0.7)
+    off = network_links(registered, set(registered), set(), WALK, weak=0.7)
     assert not any(k.vouched for k in off.links) and off.checked_only == {0, 1}
 
 

@@ -45,10 +45,10 @@ def test_a_weak_link_of_the_network_is_only_checked_where_weak_links_join_no_gro
         for p, e in made.items()
     }
     plan = set(made)
-    members = network_links(registered, plan, set(), set(), weak=0.7)
+    members = network_links(registered, plan, set(), {}, weak=0.7)
     assert [(k.target, k.source) for k in members.links] == [(0, 1), (0, 2), (1, 2)]
     assert members.checked_only == {2}
-    assert not network_links(registered, plan, set(), set()).checked_only
+    assert not network_links(registered, plan, set(), {}).checked_only
 
 
 def test_two_weak_links_that_agree_on_a_turned_placement_do_not_join_the_groups():

@@ -195,7 +195,7 @@ class Campaign:
             radius=self.radius,
             hashes=tuple(None if h.startswith(UNREADABLE) else h for h in self.hashes),
             **self._world_system(solution),
-            tried=tried_links(self.tasks.tried, links, self.net.given, members.adjacent),
+            tried=tried_links(self.tasks.tried, links, self.net.given, members.walk),
             samples={i: s.sample for i, s in sorted(self.summaries.items()) if s.sample},
         )
 

@@ -21,7 +21,7 @@ paired.
 from __future__ import annotations
 
 from collections.abc import Collection, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 from ndt_cli.pipeline.link_use import (
     contested,
@@ -38,18 +38,18 @@ from ndt_cli.pipeline.walk import Walk
 class Members:
     """The links of a network, indexed 0, 1, ... in the order of their pairs, the indices of
     those the network may only check (never join groups by), and the pairs it took for
-    neighbours along the walk."""
+    neighbours along the walk, each with its kind (adjacent or past a scan)."""
 
     links: list[Link]
     checked_only: frozenset[int]
-    adjacent: frozenset[Pair] = frozenset()
+    walk: Mapping[Pair, LinkKind] = field(default_factory=dict)
 
 
 def network_links(
     registered: Mapping[Pair, Link],
     plan: Collection[Pair],
     user: Collection[Pair],
-    adjacent: Collection[Pair],
+    walk: Mapping[Pair, LinkKind],
     classic: tuple[int, Collection[int]] | None = None,
     weak: float = 0.0,
     vouch: tuple[float, float] = (0.0, 0.0),
@@ -59,8 +59,8 @@ def network_links(
     direction (:func:`~ndt_cli.pipeline.link_use.determined`), those tried for scans no ok
     link connects (so that the outputs say why), and, to be checked only, every other link
     with rivals. ``classic``: (number of scans, unreadable scans) for the classic chain, whose
-    network is the chain in the order given and the user's pairs. ``adjacent``: neighbours
-    along the walk (:func:`~ndt_cli.pipeline.network.kind_of`). A link kept with less than
+    network is the chain in the order given and the user's pairs. ``walk``: neighbours
+    along the walk and their kinds (:func:`walk_pairs`). A link kept with less than
     ``weak`` of the most evidence of its candidates (a pose the free space refuted had more)
     is only checked too (``quality.weak_links_join`` false: ``quality.min_kept_evidence``),
     unless it is *vouched*: a link between neighbours along the walk that its gate doubted
@@ -80,23 +80,23 @@ def network_links(
         pairs |= checked
         checked |= {p for p in pairs if p in registered and kept_share(registered[p]) < weak}
     chosen = sorted(p for p in pairs if p in registered)
-    links = [
-        _member(registered[p], n, kind_of(p, user, adjacent), vouch) for n, p in enumerate(chosen)
-    ]
+    links = [_member(registered[p], n, kind_of(p, user, walk), vouch) for n, p in enumerate(chosen)]
     only = frozenset(n for n, p in enumerate(chosen) if p in checked and not links[n].vouched)
-    return Members(links, only, frozenset(adjacent))
+    return Members(links, only, dict(walk))
 
 
 def _member(link: Link, index: int, kind: LinkKind, vouch: tuple[float, float]) -> Link:
     """The registered ``link`` as the network's ``index``-th, of ``kind``, vouched or not."""
-    vouched = kind is LinkKind.ADJACENT and doubted_only_for_evidence(link, *vouch)
+    vouched = kind.walked and doubted_only_for_evidence(link, *vouch)
     return replace(link, index=index, kind=kind, vouched=vouched)
 
 
-def walk_pairs(walk: Walk, registered: Mapping[Pair, Link], n_scans: int) -> set[Pair]:
-    """The pairs of scans that are neighbours along the ``walk``
-    (:meth:`~ndt_cli.pipeline.walk.Walk.neighbours`) past the scans that no ``registered``
-    link its gate passed touches: a room scan seen only through its door and tied to neither
-    corridor scan beside it leaves those two neighbours, as taken one after the other."""
+def walk_pairs(walk: Walk, registered: Mapping[Pair, Link], n_scans: int) -> dict[Pair, LinkKind]:
+    """The pairs of scans that are neighbours along the ``walk`` and their kinds: adjacent,
+    or past a scan that no ``registered`` link its gate passed touches (a room scan seen only
+    through its door and tied to neither corridor scan beside it leaves those two neighbours,
+    as taken one after the other; :meth:`~ndt_cli.pipeline.walk.Walk.neighbours`)."""
     tied = {s for pair, link in registered.items() if link.ok for s in pair}
-    return walk.neighbours(set(range(n_scans)) - tied)
+    adjacent = walk.adjacent
+    pairs = walk.neighbours(set(range(n_scans)) - tied)
+    return {p: LinkKind.ADJACENT if p in adjacent else LinkKind.PAST for p in sorted(pairs)}

@@ -34,8 +34,14 @@ class LinkKind(StrEnum):
     """Why a pair of scans is registered."""
 
     ADJACENT = "adjacent"  # consecutive in the campaign's order (the walk, when there is one)
+    PAST = "past"  # neighbours along the walk past one scan that tied in nothing (a room)
     FOUND = "found"  # found by where the scans are, whatever their order
     USER = "user"  # listed by the user (--pairs)
+
+    @property
+    def walked(self) -> bool:
+        """Whether the pair are neighbours along the walk (adjacent, or past a scan)."""
+        return self in (LinkKind.ADJACENT, LinkKind.PAST)
 
 
 class Bridges(StrEnum):
@@ -77,12 +83,12 @@ def pair_of(a: int, b: int) -> Pair:
     return (min(a, b), max(a, b))
 
 
-def kind_of(pair: Pair, user: Collection[Pair], adjacent: Collection[Pair]) -> LinkKind:
-    """How a link came to be: given by the user, between neighbours along the walk (the pairs
-    ``adjacent``, :attr:`ndt_cli.pipeline.walk.Walk.adjacent`), or found."""
+def kind_of(pair: Pair, user: Collection[Pair], walk: Mapping[Pair, LinkKind]) -> LinkKind:
+    """How a link came to be: given by the user, between neighbours along the walk (``walk``:
+    their pairs and kinds, :func:`~ndt_cli.pipeline.members.walk_pairs`), or found."""
     if pair in user:
         return LinkKind.USER
-    return LinkKind.ADJACENT if pair in adjacent else LinkKind.FOUND
+    return walk.get(pair, LinkKind.FOUND)
 
 
 def classic_chain(n_scans: int, unreadable: Iterable[int] = ()) -> list[PlannedLink]:

@@ -4,7 +4,7 @@ builds it)."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from enum import StrEnum
 from pathlib import Path
@@ -14,7 +14,7 @@ import numpy as np
 from ndt_cli.pipeline.control import Station
 from ndt_cli.pipeline.datum import not_georeferenced
 from ndt_cli.pipeline.links import Link
-from ndt_cli.pipeline.network import Pair, kind_of, pair_of
+from ndt_cli.pipeline.network import LinkKind, Pair, kind_of, pair_of
 from ndt_cli.pipeline.samples import SliceSample
 from ndt_cli.pipeline.solution import NetworkSolution
 from ndt_cli.pipeline.verify import EdgeState, NodeStatus
@@ -123,11 +123,12 @@ def scan_report(index: int, result: ChainResult) -> ScanReport:
 
 
 def tried_links(
-    tried: Sequence[Link], links: Sequence[Link], user: set[Pair], adjacent: set[Pair]
+    tried: Sequence[Link], links: Sequence[Link], user: set[Pair], walk: Mapping[Pair, LinkKind]
 ) -> tuple[TriedLink, ...]:
     """The registrations run (``tried``) that are not ``links`` of the network, indexed after
     them, in the order of their scans: why each is left out; ``user``: the pairs given,
-    ``adjacent``: neighbours along the walk (:func:`~ndt_cli.pipeline.network.kind_of`)."""
+    ``walk``: neighbours along the walk and their kinds
+    (:func:`~ndt_cli.pipeline.network.kind_of`)."""
     network = {k.key for k in links}
     ways = {pair_of(k.target, k.source): (k.target, k.source) for k in links}
     others = sorted(
@@ -138,9 +139,7 @@ def tried_links(
     for n, k in enumerate(others):
         pair = pair_of(k.target, k.source)
         why = _why(k, ways.get(pair))
-        out.append(
-            TriedLink(replace(k, index=len(links) + n, kind=kind_of(pair, user, adjacent)), why)
-        )
+        out.append(TriedLink(replace(k, index=len(links) + n, kind=kind_of(pair, user, walk)), why))
     return tuple(out)
 
 

@@ -144,7 +144,7 @@ def solve(
     Bridges`: ``quality.trust_bridges``, ``quality.trust_walk_bridges``);
     ``checked_only``: the ambiguous links (by index) that may only be chosen where firm links
     tie their scans together (:mod:`ndt_cli.pipeline.members`)."""
-    plain = tuple(chained(n_scans, links, anchor, {LinkKind.ADJACENT}))
+    plain = tuple(chained(n_scans, links, anchor, {LinkKind.ADJACENT, LinkKind.PAST}))
     if adjust:
         judging = (ambiguity, bridges, frozenset(checked_only))
         return _adjusted(n_scans, anchor, links, unreadable, plain, controls, grid_scale, judging)
@@ -297,7 +297,7 @@ def _edge(link: Link, walk: bool = False) -> Edge:
     r = link.result
     flat = link.status is Status.DEGENERATE  # where its scans are horizontally: unknown
     T, cov = r.T_reduced, link_covariance(r)
-    walked = walk and link.kind is LinkKind.ADJACENT
+    walked = walk and link.kind.walked
     trusted = link.ok or link.vouched  # a vouched link is a suspect one (its gate doubted it)
     return Edge(link.target, link.source, T, cov, trusted, not flat, walked, link.vouched)
 

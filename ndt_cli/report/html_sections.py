@@ -45,7 +45,7 @@ class LinkRow:
     """One link (or registration tried): its registration, its state and its residual after
     the adjustment, its strength and where its inspector figure is.
 
-    ``kind``: adjacent, found, user, pair; ``status``: the registration's (ok, suspect,
+    ``kind``: adjacent, past, found, user, pair; ``status``: the registration's (ok, suspect,
     degenerate, not_converged, no_overlap, failed); ``state``: the link in the network as the
     report words it (confirmed, not checked, rejected, not used; a registration left out: not
     planned, other way kept). ``overlap`` is a fraction (0-1, shown in %); a link no cycle
