@@ -217,15 +217,25 @@ def test_control_stations_place_the_scans_no_link_ties_to_the_anchor(tmp_path, d
 @pytest.mark.slow
 def test_where_no_bridge_is_trusted_a_probe_is_not_registered_the_other_way_round(tmp_path):
     """Indoors (``quality.trust_bridges`` false) a link on no cycle ties no scan in alone, so
-    groups are bridged without registering a marginal probe the other way round: the last two
-    scans of the first day's files above stay registered one way, and neither is ok."""
-    files, _ = _apart(tmp_path, DAYS[0])
+    groups are bridged without registering a probe the other way round: the last two scans of
+    the first day's files above (42 m apart, 14 % overlap) stay registered one way, and
+    neither joins the anchor's cluster. Whether that one link holds depends on the last bits
+    of the arithmetic (degenerate on one CPU, ok on another): if it is ok, the two are ok in a
+    cluster of their own, their relative pose right; otherwise neither is posed."""
+    files, poses = _apart(tmp_path, DAYS[0])
     config, out = tmp_path / "no_bridges.yaml", tmp_path / "out"
     config.write_text("quality:\n  trust_bridges: false\n")
     run = _run("chain_app", *map(str, files), "-o", str(out), "-j", "2", "-q", "-c", str(config))
     assert run.returncode == 1, run.stderr
     rows = list(csv.DictReader((out / "pairs.csv").open()))
     last = [r for r in rows if {r["target"], r["source"]} == {"scan_1.laz", "scan_2.laz"}]
-    assert [(r["target"], r["status"]) for r in last] == [("scan_2.laz", "degenerate")]
+    assert len(last) == 1, last  # one way only
     found = list(csv.DictReader((out / "poses.csv").open()))
-    assert [r["status"] for r in found] == ["ok", "unposed", "unposed"]
+    assert found[0]["status"] == "ok" and found[0]["cluster"] == "0"
+    if last[0]["status"] != "ok":
+        assert [r["status"] for r in found[1:]] == ["unposed", "unposed"]
+        return
+    assert [(r["status"], r["cluster"]) for r in found[1:]] == [("ok", "1"), ("ok", "1")]
+    T_1_2 = np.linalg.inv(_pose(found[1])) @ _pose(found[2])
+    rot, trans = _errors(T_1_2, np.linalg.inv(poses[1]) @ poses[2])
+    assert rot < ROT_DEG and trans < TRANS_M, (rot, trans)
