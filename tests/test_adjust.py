@@ -225,6 +225,7 @@ def test_sqrt_information_is_a_positive_definite_root_whatever_the_eigenvectors_
     assert np.allclose(R, np.swapaxes(R, 1, 2)) and np.all(np.linalg.eigvalsh(R) > 0)
     assert np.allclose(R[-1], np.diag(d**-0.5), rtol=1e-12)
     import gtsam
+
     model = gtsam.noiseModel.Gaussian.SqrtInformation(R[-1])
     assert np.allclose(model.sigmas(), np.sqrt(d), rtol=1e-9)
 
