@@ -13,6 +13,7 @@ import pytest
 
 from ndt_cli import sim
 from ndt_cli.config import Config
+from ndt_cli.ndt import landmarks as lm
 from ndt_cli.ndt.landmarks import KEY_STEP, LONGEST, SHORTEST, landmarks, triangle_keys
 from ndt_cli.pipeline import links, placement
 from ndt_cli.pipeline.candidates import (
@@ -71,6 +72,68 @@ def _triangles_by_loop(points: np.ndarray) -> set[tuple[int, int, int]]:
 
 
 @pytest.mark.slow
+def _alone_scipy(xy: np.ndarray) -> np.ndarray:
+    """The landmarks of one slice as scipy finds them: its image labelled by
+    ``ndimage.label``, boxes by ``find_objects``, points around by a k-d tree."""
+    from scipy import ndimage
+    from scipy.spatial import cKDTree
+
+    ij = np.floor((xy - (xy.min(axis=0) - lm.CELL)) / lm.CELL).astype(np.int64)
+    image = np.zeros(tuple(ij.max(axis=0) + 1), dtype=bool)
+    image[ij[:, 0], ij[:, 1]] = True
+    labels, n = ndimage.label(image, structure=np.ones((3, 3)))
+    label = labels[ij[:, 0], ij[:, 1]]
+    count = np.bincount(label, minlength=n + 1)[1:]
+    centre = np.stack([np.bincount(label, xy[:, k], n + 1)[1:] for k in (0, 1)], axis=1)
+    centre /= np.maximum(count, 1)[:, None]
+    boxes = ndimage.find_objects(labels)
+    wide = np.array([max(b[0].stop - b[0].start, b[1].stop - b[1].start) for b in boxes])
+    wide = wide * lm.CELL
+    small = (count >= lm.MIN_POINTS) & (wide <= lm.MAX_EXTENT)
+    if not small.any():
+        return np.zeros((0, 2))
+    r = lm.ALONE + 0.5 * wide[small]
+    around = cKDTree(xy).query_ball_point(centre[small], r, return_length=True)
+    return centre[np.flatnonzero(small)[around == count[small]]]
+
+
+@pytest.mark.parametrize("fill", [0.05, 0.3, 0.55, 0.8])
+def test_cell_groups_are_scipy_s_8_connected_labels(fill):
+    from scipy import ndimage
+
+    rng = np.random.default_rng(int(fill * 100))
+    image = rng.random((60, 45)) < fill
+    image[:, 0] = image[:, -1] = False  # the first and last columns free, as the slices' are
+    image[10:50, 20] = True  # a long wall through many small groups
+    cells = np.flatnonzero(image)
+    expected, _ = ndimage.label(image, structure=np.ones((3, 3)))
+    got = lm.components(cells, image.shape[1])
+    np.testing.assert_array_equal(got, expected.ravel()[cells] - 1)
+
+
+def test_points_within_a_radius_are_those_a_k_d_tree_counts():
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(5)
+    xy = np.concatenate([rng.uniform(-40, 25, (4000, 2)), rng.normal(3.0, 0.4, (500, 2))])
+    centres = np.concatenate([rng.uniform(-45, 30, (300, 2)), xy[:50]])
+    radius = rng.uniform(0.1, 2.5, len(centres))
+    expected = cKDTree(xy).query_ball_point(centres, radius, return_length=True)
+    np.testing.assert_array_equal(lm.points_within(xy, centres, radius), expected)
+
+
+def test_a_real_scan_s_landmarks_are_those_scipy_finds():
+    """The sample street's slices: every slice's landmarks equal scipy's, to 1e-9 m."""
+    scan = prepare_scan(str(SAMPLE / "scan_00.laz"), Config())
+    thin = [lm.voxel_filter_2d(np.reshape(s, (-1, 2)), lm.THIN) for s in scan.slices]
+    found = 0
+    for cut in thin:
+        expected = _alone_scipy(cut)
+        np.testing.assert_allclose(lm._alone(cut), expected, atol=1e-9)
+        found += len(expected)
+    assert found >= 5  # the street's posts and trunks
+
+
 def test_triangle_keys_are_every_triangle_in_range_and_do_not_turn_with_the_scan():
     rng = np.random.default_rng(2)
     points = rng.uniform(-40.0, 40.0, (30, 2))
